@@ -1,0 +1,19 @@
+"""Reproductions of the paper's experiments and benchmarks (``tactrec bench NAME``).
+
+:data:`BENCHMARKS` maps a name to a function ``run(*, out, instances, seed,
+jobs, quiet) -> dict`` that writes its JSON table and plots into ``out`` and
+returns the table.  A new benchmark adds its module and one line here.
+"""
+
+from __future__ import annotations
+
+from typing import Callable
+
+from . import paper_closedform
+
+__all__ = ["BENCHMARKS"]
+
+BENCHMARKS: dict[str, Callable[..., dict]] = {
+    "paper-table2": paper_closedform.run_table2,
+    "paper-table3": paper_closedform.run_table3,
+}

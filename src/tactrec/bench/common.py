@@ -1,0 +1,64 @@
+"""Shared machinery of the benchmarks: seeding, worker processes, output."""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+from concurrent.futures import ProcessPoolExecutor
+from importlib import resources
+from pathlib import Path
+from typing import Callable, Sequence
+
+import numpy as np
+
+from ..io.atomic import write_text_atomic
+
+__all__ = ["paper_values", "instance_rng", "run_parallel", "write_json", "default_jobs"]
+
+
+def paper_values() -> dict:
+    """The paper's published numbers (``paper_values.json``)."""
+    return json.loads((resources.files("tactrec.bench") / "paper_values.json").read_text(encoding="utf-8"))
+
+
+def instance_rng(seed: int, *keys: int) -> np.random.Generator:
+    """A generator for one instance, independent of how instances are split over workers."""
+    return np.random.default_rng(np.random.SeedSequence([int(seed), *map(int, keys)]))
+
+
+def default_jobs() -> int:
+    return max(1, min(2, os.cpu_count() or 1))
+
+
+def run_parallel(fn: Callable, tasks: Sequence, *, jobs: int, quiet: bool, desc: str) -> list:
+    """``[fn(t) for t in tasks]``, in order, over ``jobs`` processes, with a progress bar."""
+    from tqdm import tqdm
+
+    bar = tqdm(total=len(tasks), desc=desc, file=sys.stderr, disable=quiet or not sys.stderr.isatty(), leave=False)
+    results = []
+    try:
+        if jobs <= 1:
+            for t in tasks:
+                results.append(fn(t))
+                bar.update()
+        else:
+            with ProcessPoolExecutor(max_workers=jobs) as pool:
+                for r in pool.map(fn, tasks, chunksize=1):
+                    results.append(r)
+                    bar.update()
+    finally:
+        bar.close()
+    return results
+
+
+def write_json(path: Path, table: dict) -> None:
+    write_text_atomic(path, json.dumps(table, indent=1, default=_default) + "\n")
+
+
+def _default(obj):
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    raise TypeError(type(obj).__name__)

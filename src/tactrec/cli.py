@@ -1,0 +1,277 @@
+"""The ``tactrec`` command: parse, call the library, print.
+
+Bad arguments and bad input exit with status 2 and one line on stderr
+naming the file (or argument) and the problem.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from . import __version__
+from .errors import InputError
+
+EXIT_BAD_INPUT = 2
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse, but a usage error is one line."""
+
+    def error(self, message):  # noqa: D401
+        raise InputError(message, self.prog)
+
+
+def _floats(text: str, count: int, what: str):
+    try:
+        values = [float(x) for x in text.split(",")]
+    except ValueError:
+        raise InputError(f"expected {count} comma-separated numbers, got {text!r}", what) from None
+    if len(values) != count or not all(np.isfinite(values)):
+        raise InputError(f"expected {count} comma-separated finite numbers, got {text!r}", what)
+    return np.array(values)
+
+
+def _positive(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not np.isfinite(value) or value <= 0:
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text!r}")
+    return value
+
+
+def _nonnegative(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not np.isfinite(value) or value < 0:
+        raise argparse.ArgumentTypeError(f"must be a non-negative number, got {text!r}")
+    return value
+
+
+def _count(minimum: int):
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"must be at least {minimum}, got {value}")
+        return value
+
+    return parse
+
+
+def _warn(line: str) -> None:
+    print(f"tactrec: warning: {line}", file=sys.stderr)
+
+
+# ---------------------------------------------------------------------- commands
+def cmd_build(args) -> int:
+    from .database import build_database
+
+    report = build_database(args.models, args.out, quiet=args.quiet)
+    if not args.quiet:
+        removed = f", {len(report.removed)} old file(s) removed" if report.removed else ""
+        print(f"{report.path}: {len(report.built)} built, {len(report.reused)} unchanged{removed}")
+        for name in report.built:
+            print(f"  built    {name}")
+        for name in report.reused:
+            print(f"  reused   {name}")
+    return 0
+
+
+def _recognition_options(args) -> dict:
+    options = {}
+    if args.delta is not None:
+        options["delta"] = args.delta
+    return options
+
+
+def cmd_recognize(args) -> int:
+    from .database import open_models
+    from .io.touch import load_touch
+    from .recognition import recognize
+
+    if (args.db is None) == (not args.models):
+        raise InputError("give either --db DB or --models MODEL...", "tactrec recognize")
+    touches = [load_touch(path) for path in args.data]          # validate everything first
+    db = open_models(db=args.db, models=args.models, warn=_warn, quiet=args.quiet)
+    results = [recognize(t, db, method=args.method, **_recognition_options(args)) for t in touches]
+    out_lines = []
+    for path, result in zip(args.data, results):
+        if args.json:
+            out_lines.append(json.dumps(dict({"file": str(path)}, **result.to_json())))
+        else:
+            out_lines.append(_format_result(str(path), result))
+    sys.stdout.write("\n".join(out_lines) + "\n")
+    return 0
+
+
+def _format_result(name: str, result) -> str:
+    est = result.estimate
+    lines = [f"{name}: {'best ' + result.best if result.best else 'no model matches'}"
+             f"   (k1 {est.k1:.4g}, k2 {est.k2:.4g}; {result.seconds:.2f} s, method {result.method})"]
+    for rank, r in enumerate(result.ranking, start=1):
+        if r.ok:
+            loc = ", ".join(f"{x:.4g}" for x in r.location)
+            lines.append(f"  {rank:2d}. {r.model:24s} error {r.error:.6g}   candidates {r.candidates:5d}"
+                         f"   at ({loc})")
+        else:
+            lines.append(f"   -. {r.model:24s} rejected: {r.rejected}")
+    return "\n".join(lines)
+
+
+def cmd_simulate(args) -> int:
+    from .io.touch import save_touch
+    from .simulation import simulate_random_touch, simulate_touch
+    from .surfaces import load_model
+
+    model = load_model(args.model)
+    given = [x for x in (args.at, args.uv, args.vertex) if x is not None]
+    if len(given) > 1:
+        raise InputError("give at most one of --at, --uv, --vertex", "tactrec simulate")
+    if args.vertex is not None and model.kind != "mesh":
+        raise InputError("--vertex is for mesh models; use --uv or --at on a closed-form surface", args.model)
+    if args.uv is not None and model.kind != "closed-form":
+        raise InputError("--uv is for closed-form surfaces; use --vertex or --at on a mesh", args.model)
+    rng = np.random.default_rng(args.seed)
+    spacing = args.spacing if args.spacing is not None else model.size / 100.0
+    options = dict(points=args.points, spacing=spacing, angle=args.angle, curves=args.curves, noise=args.noise,
+                   noise_kind=args.noise_kind, outward=not args.no_outward, contact=args.contact,
+                   sensor_frame=not args.model_frame)
+    try:
+        if args.at is not None:
+            site = model.locate(_floats(args.at, 3, "--at"))
+        elif args.uv is not None:
+            site = model.wrap(_floats(args.uv, 2, "--uv"))
+        elif args.vertex is not None:
+            site = np.array([args.vertex])
+        else:
+            site = None
+        data = (simulate_touch(model, site, rng=rng, **options) if site is not None
+                else simulate_random_touch(model, rng=rng, **options))
+    except ValueError as exc:
+        raise InputError(str(exc), args.model) from None
+    save_touch(data, args.out)
+    if not args.quiet:
+        t = data.meta["truth"]
+        print(f"{args.out}: {len(data.curves)} curves x {args.points} points on {model.name} at "
+              f"({', '.join(f'{x:.4g}' for x in t['contact'])}), spacing {spacing:.4g}")
+    return 0
+
+
+def cmd_bench(args) -> int:
+    from .bench import BENCHMARKS
+
+    if args.name not in BENCHMARKS:
+        raise InputError(f"unknown benchmark; available: {', '.join(sorted(BENCHMARKS))}", args.name)
+    out = Path(args.out) if args.out else Path("bench-out")
+    table = BENCHMARKS[args.name](out=out, instances=args.instances, seed=args.seed, jobs=args.jobs,
+                                  quiet=args.quiet, method=args.method)
+    print(table["text"])
+    print(f"wrote {out / (args.name + '.json')}" + "".join(f", {p}" for p in table.get("plots", [])))
+    return 0
+
+
+def cmd_demo(args) -> int:
+    from .demo import run_demo
+
+    result = run_demo(seed=args.seed, out=args.out, quiet=args.quiet)
+    print(result["text"])
+    return 0
+
+
+# ---------------------------------------------------------------------- parser
+def build_parser() -> argparse.ArgumentParser:
+    from .registration import DEFAULT_METHOD, METHODS
+
+    parser = _Parser(prog="tactrec", description="Recognise an object and locate a touch on it from three "
+                     "(or more) concurrent tactile curves (Ibrayev & Jia).")
+    parser.add_argument("--version", action="version", version=f"tactrec {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    p = sub.add_parser("demo", help="simulate a touch on a random built-in model and recognise it")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--out", default="tactrec-demo.png", help="picture to write (default tactrec-demo.png)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=cmd_demo)
+
+    p = sub.add_parser("build", help="build a model database from model files or built-in names")
+    p.add_argument("models", nargs="+", metavar="MODEL",
+                   help="model files (.toml), built-in names, or a built-in set (closed-form, paper-table1, ...)")
+    p.add_argument("--out", required=True, metavar="DB", help="database folder")
+    p.add_argument("--quiet", action="store_true", help="print nothing but errors")
+    p.set_defaults(func=cmd_build)
+
+    p = sub.add_parser("recognize", help="recognise touches against a database")
+    p.add_argument("data", nargs="+", metavar="DATA", help="tactile data files (.json or .csv)")
+    p.add_argument("--db", metavar="DB", help="database built by 'tactrec build'")
+    p.add_argument("--models", nargs="+", metavar="MODEL", help="model files or built-in names, instead of --db")
+    p.add_argument("--json", action="store_true", help="one JSON object per data file, one per line")
+    p.add_argument("--method", choices=sorted(METHODS), default=DEFAULT_METHOD,
+                   help=f"registration method (default {DEFAULT_METHOD})")
+    p.add_argument("--delta", type=_positive, help="lookup tolerance on (k1, k2), 1/model units")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=cmd_recognize)
+
+    p = sub.add_parser("simulate", help="generate tactile data on a model")
+    p.add_argument("model", metavar="MODEL", help="model file or built-in name")
+    p.add_argument("--out", required=True, metavar="DATA", help="data file to write (.json or .csv)")
+    p.add_argument("--at", metavar="X,Y,Z", help="contact near this point (model frame)")
+    p.add_argument("--uv", metavar="U,V", help="contact at these parameters (closed-form surface)")
+    p.add_argument("--vertex", type=_count(0), metavar="I", help="contact at this vertex (mesh)")
+    p.add_argument("--points", type=_count(5), default=61, help="points per curve (default 61)")
+    p.add_argument("--spacing", type=_positive, help="arc length between points (default: model size / 100)")
+    p.add_argument("--angle", type=_positive, default=60.0, help="degrees between adjacent planes (default 60)")
+    p.add_argument("--curves", type=_count(3), default=3, help="number of curves (default 3)")
+    p.add_argument("--noise", type=_nonnegative, default=0.0, help="noise amplitude (uniform) or sigma (gaussian)")
+    p.add_argument("--noise-kind", choices=["uniform", "gaussian"], default="uniform")
+    p.add_argument("--no-outward", action="store_true", help="leave out the outward hint")
+    p.add_argument("--contact", action="store_true", help="include the (noise-free) contact point")
+    p.add_argument("--model-frame", action="store_true", help="no random rigid motion (data in the model frame)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--quiet", action="store_true", help="print nothing but errors")
+    p.set_defaults(func=cmd_simulate)
+
+    p = sub.add_parser("bench", help="run a reproduction or benchmark (paper-table2, paper-table3, ...)")
+    p.add_argument("name", metavar="NAME", help="benchmark name")
+    p.add_argument("--instances", type=_count(1), default=10, help="instances per model (default 10)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--jobs", type=_count(1), default=None, help="worker processes (default: up to 2)")
+    p.add_argument("--method", choices=sorted(METHODS), default="paper", help="method (default paper)")
+    p.add_argument("--out", metavar="DIR", help="output folder (default bench-out)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=cmd_bench)
+    return parser
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+        return args.func(args)
+    except InputError as exc:
+        print(f"tactrec: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        print("tactrec: interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:
+        try:
+            sys.stdout = open(os.devnull, "w")
+        except OSError:
+            pass
+        return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,247 @@
+"""Model databases: everything recognition needs, stored safely.
+
+A database is a folder::
+
+    DB/index.json              format, version, one entry per model
+    DB/<name>-<hash>.npz       the model's arrays and its lookup table
+
+Arrays are plain ``.npz`` files read with ``allow_pickle=False``; each entry
+records the SHA-256 of its source file (a changed source is rebuilt, an
+unchanged one reused) and of its ``.npz`` (a damaged file is reported, not
+used).  Every file is written atomically.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import io
+import json
+import os
+import re
+import sys
+from pathlib import Path
+from typing import Iterable, Sequence
+
+import numpy as np
+
+from .errors import InputError
+from .io.atomic import atomic_write, write_text_atomic
+from .recognition import ModelEntry
+from .surfaces import KINDS, load_model, resolve_models
+from .tables import CurvatureTable
+
+__all__ = ["Database", "BuildReport", "build_database", "load_database", "build_entries", "file_sha256",
+           "open_models"]
+
+FORMAT = "tactrec-db"
+VERSION = 1
+#: bump when table construction changes, so that old tables are rebuilt
+TABLE_VERSION = 1
+
+
+@dataclasses.dataclass
+class Database:
+    """Models with their tables, as used by :func:`tactrec.recognition.recognize`."""
+
+    entries: list[ModelEntry]
+    path: Path | None = None
+
+    def __iter__(self):
+        return iter(self.entries)
+
+    def __len__(self) -> int:
+        return len(self.entries)
+
+    @property
+    def names(self) -> list[str]:
+        return [e.name for e in self.entries]
+
+    def get(self, name: str) -> ModelEntry:
+        for e in self.entries:
+            if e.name == name:
+                return e
+        raise KeyError(name)
+
+
+@dataclasses.dataclass(frozen=True)
+class BuildReport:
+    path: Path
+    built: list[str]
+    reused: list[str]
+    removed: list[str]
+
+
+def file_sha256(path: str | os.PathLike) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _progress(iterable, *, total: int, desc: str, quiet: bool):
+    from tqdm import tqdm
+
+    return tqdm(iterable, total=total, desc=desc, unit="model", file=sys.stderr,
+                disable=quiet or not sys.stderr.isatty(), leave=False)
+
+
+def _entry(model) -> ModelEntry:
+    return ModelEntry(model, CurvatureTable(model.table_samples()))
+
+
+def build_entries(models: Iterable, *, quiet: bool = True) -> Database:
+    """Load models (paths, built-in names or set names) and build their tables in memory."""
+    paths = resolve_models(models)
+    entries = [_entry(load_model(p)) for p in _progress(paths, total=len(paths), desc="models", quiet=quiet)]
+    _check_unique([e.name for e in entries], paths)
+    return Database(entries)
+
+
+def _check_unique(names: Sequence[str], paths: Sequence) -> None:
+    seen: dict[str, object] = {}
+    for name, path in zip(names, paths):
+        if name in seen:
+            raise InputError(f"two models are named {name!r} (also {seen[name]})", path)
+        seen[name] = path
+
+
+def _safe(name: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", name)[:80] or "model"
+
+
+def _read_index(db: Path) -> dict:
+    index_path = db / "index.json"
+    if not db.exists():
+        raise InputError("no such database", db)
+    if not db.is_dir():
+        raise InputError("a database is a folder holding index.json", db)
+    if not index_path.exists():
+        raise InputError("not a tactrec database (no index.json)", db)
+    try:
+        index = json.loads(index_path.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(f"corrupted database index ({exc.__class__.__name__})", index_path) from None
+    if not isinstance(index, dict) or index.get("format") != FORMAT or not isinstance(index.get("models"), list):
+        raise InputError("corrupted database index (not a tactrec database)", index_path)
+    if index.get("version") != VERSION:
+        raise InputError(f"database version {index.get('version')!r} is not {VERSION}; rebuild it", index_path)
+    for item in index["models"]:
+        if not isinstance(item, dict) or not all(isinstance(item.get(k), str) for k in
+                                                 ("name", "kind", "file", "source", "source_sha256", "file_sha256")):
+            raise InputError("corrupted database index (a model entry is incomplete)", index_path)
+    return index
+
+
+def _load_entry(db: Path, item: dict) -> ModelEntry:
+    path = db / item["file"]
+    if Path(item["file"]).name != item["file"]:
+        raise InputError("corrupted database index (bad file name)", db / "index.json")
+    if not path.is_file():
+        raise InputError("missing from the database; rebuild it", path)
+    blob = path.read_bytes()
+    if hashlib.sha256(blob).hexdigest() != item["file_sha256"]:
+        raise InputError("corrupted database file (checksum mismatch); rebuild it", path)
+    kind = KINDS.get(item["kind"])
+    if kind is None:
+        raise InputError(f"unknown model kind {item['kind']!r}", path)
+    try:
+        with np.load(io.BytesIO(blob), allow_pickle=False) as npz:
+            arrays = {k: npz[k] for k in npz.files}
+        model = kind.from_store(arrays, name=item["name"], source=item["source"])
+        table = CurvatureTable.from_arrays(arrays)
+    except InputError as exc:
+        raise InputError(f"corrupted database file ({exc.reason})", path) from None
+    except (ValueError, KeyError, OSError, EOFError) as exc:
+        raise InputError(f"corrupted database file ({exc.__class__.__name__}: {exc})", path) from None
+    return ModelEntry(model, table)
+
+
+def load_database(path: str | os.PathLike, *, warn=None) -> Database:
+    """Load a database built by :func:`build_database`.
+
+    ``warn`` (a callable taking one line) is told about models whose source
+    file has changed since the database was built.
+    """
+    db = Path(path)
+    index = _read_index(db)
+    entries = []
+    for item in index["models"]:
+        entries.append(_load_entry(db, item))
+        src = Path(item["source"])
+        if warn is not None and not item.get("builtin") and src.is_file() and file_sha256(src) != item["source_sha256"]:
+            warn(f"{src}: changed since the database was built; run 'tactrec build' to update {db}")
+    if not entries:
+        raise InputError("the database holds no models", db)
+    return Database(entries, db)
+
+
+def build_database(models: Iterable, out: str | os.PathLike, *, quiet: bool = False) -> BuildReport:
+    """Build (or update) the database ``out`` from model files or built-in names.
+
+    Models whose source file (and table builder) are unchanged are reused;
+    the others are rebuilt.  The database afterwards holds exactly ``models``.
+    """
+    out = Path(out)
+    paths = resolve_models(models)
+    if not paths:
+        raise InputError("no models given", out)
+    old: dict[str, dict] = {}
+    if (out / "index.json").exists():
+        try:
+            index = _read_index(out)
+            old = {item["name"]: item for item in index["models"]}
+        except InputError:
+            old = {}  # a broken database is rebuilt from scratch
+    elif out.exists() and not out.is_dir():
+        raise InputError("exists and is not a folder", out)
+    from .surfaces import builtin_path  # noqa: F401  (for the builtin flag below)
+
+    items, built, reused, names = [], [], [], []
+    builtin_root = str(Path(builtin_path("ellipsoid")).parent)
+    for path in _progress(paths, total=len(paths), desc="building", quiet=quiet):
+        if not Path(path).is_file():
+            load_model(path)  # raises the right one-line error
+        sha = file_sha256(path)
+        model = load_model(path)
+        names.append(model.name)
+        prev = old.get(model.name)
+        if (prev and prev["source_sha256"] == sha and prev.get("table_version") == TABLE_VERSION
+                and (out / prev["file"]).is_file()
+                and file_sha256(out / prev["file"]) == prev["file_sha256"]):
+            items.append(dict(prev, source=str(path)))
+            reused.append(model.name)
+            continue
+        entry = _entry(model)
+        arrays = dict(model.to_store(), **entry.table.to_arrays())
+        buffer = io.BytesIO()
+        np.savez_compressed(buffer, **arrays)
+        blob = buffer.getvalue()
+        name = f"{_safe(model.name)}-{sha[:16]}.npz"
+        with atomic_write(out / name, "wb") as handle:
+            handle.write(blob)
+        items.append({
+            "name": model.name, "kind": model.kind, "units": model.units, "file": name,
+            "source": str(path), "source_sha256": sha, "file_sha256": hashlib.sha256(blob).hexdigest(),
+            "table_rows": len(entry.table), "table_version": TABLE_VERSION,
+            "builtin": str(path).startswith(builtin_root),
+        })
+        built.append(model.name)
+    _check_unique(names, paths)
+    index = {"format": FORMAT, "version": VERSION, "models": items}
+    write_text_atomic(out / "index.json", json.dumps(index, indent=1) + "\n")
+    keep = {item["file"] for item in items}
+    removed = []
+    for f in out.glob("*.npz"):
+        if f.name not in keep:
+            f.unlink()
+            removed.append(f.name)
+    return BuildReport(out, built, reused, removed)
+
+
+def open_models(*, db=None, models=None, warn=None, quiet: bool = True) -> Database:
+    """A database from ``db`` (a folder) or built on the fly from ``models``."""
+    if db is not None:
+        return load_database(db, warn=warn)
+    return build_entries(models, quiet=quiet)

@@ -1,0 +1,332 @@
+"""Local geometry at the contact point from the data curves (paper Section 3.1).
+
+* Section 3.1.1 -- per curve, a parabola ``y = a x^2 + b x + c`` in its sampling
+  plane gives the tangent ``T_i``, principal normal ``N_i`` and curvature
+  ``kappa_i`` at ``p``; the data normal ``N`` minimises ``sum (N . T_i)^2``
+  (eq. 1).
+* Section 3.1.2 -- normal curvatures ``kn_i = kappa_i (N_i . N)`` (Meusnier) and,
+  by Euler's theorem (eqs. 2-4), the principal curvatures: the paper's closed
+  form for three curves (eqs. 5-6) or linear least squares
+  ``kn_i = H + B cos 2 psi_i + C sin 2 psi_i`` for three or more.
+
+Sign convention as in :mod:`tactrec.surfaces.base`: with ``N`` pointing out of
+the object, a convex surface has negative curvatures; ``k1 >= k2``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from .errors import InputError
+from .io.touch import TactileData
+
+__all__ = [
+    "CurveFit", "LocalGeometry", "fit_curve", "data_normal", "principal_curvatures",
+    "find_contact", "check_meeting", "estimate",
+]
+
+
+@dataclasses.dataclass(frozen=True)
+class CurveFit:
+    """Differential geometry of one data curve at ``p`` (Section 3.1.1).
+
+    Attributes
+    ----------
+    tangent : (3,) unit tangent ``T_i``
+    principal_normal : (3,) unit principal normal ``N_i`` (towards the centre of curvature)
+    curvature : float, ``kappa_i >= 0``
+    plane_normal : (3,) unit normal of the fitted sampling plane
+    """
+
+    tangent: np.ndarray
+    principal_normal: np.ndarray
+    curvature: float
+    plane_normal: np.ndarray
+
+
+@dataclasses.dataclass(frozen=True)
+class LocalGeometry:
+    """Estimated normal and principal curvatures at the contact point.
+
+    Attributes
+    ----------
+    contact : (3,) the common point ``p`` of the curves, data frame
+    normal : (3,) unit data normal ``N`` (eq. 1)
+    k1, k2 : principal curvatures, ``k1 >= k2`` (eqs. 5-6 or least squares)
+    directions : (2, 3) principal directions for ``k1`` and ``k2``; ``d1 x d2 = N``
+    tangents : (k, 3) curve tangents ``T_i`` at ``p``
+    normal_curvatures : (k,) ``kn_i = kappa_i (N_i . N)``
+    oriented : True if ``N`` was oriented by an ``outward`` hint
+    """
+
+    contact: np.ndarray
+    normal: np.ndarray
+    k1: float
+    k2: float
+    directions: np.ndarray
+    tangents: np.ndarray
+    normal_curvatures: np.ndarray
+    oriented: bool
+
+    @property
+    def curvatures(self) -> tuple[float, float]:
+        return (self.k1, self.k2)
+
+    def flipped(self) -> "LocalGeometry":
+        """The same estimate with the normal reversed: ``(k1, k2) -> (-k2, -k1)``."""
+        return dataclasses.replace(
+            self,
+            normal=-self.normal,
+            k1=-self.k2,
+            k2=-self.k1,
+            directions=self.directions[::-1].copy(),
+            normal_curvatures=-self.normal_curvatures,
+        )
+
+
+# ---------------------------------------------------------------------- contact
+def _closest_on_polyline(points: np.ndarray, line: np.ndarray) -> np.ndarray:
+    """Closest points ``(m, 3)`` on the polyline ``line`` ``(n, 3)`` to ``points``."""
+    a, b = line[:-1], line[1:]
+    ab = b - a
+    denom = np.maximum(np.sum(ab * ab, axis=1), 1e-300)
+    t = np.clip(np.einsum("msk,sk->ms", points[:, None, :] - a[None], ab) / denom, 0.0, 1.0)
+    cand = a[None] + t[..., None] * ab[None]
+    d2 = np.sum((cand - points[:, None, :]) ** 2, axis=2)
+    return cand[np.arange(len(points)), np.argmin(d2, axis=1)]
+
+
+def find_contact(curves) -> np.ndarray:
+    """The point where the curves meet: least squares distance to all polylines.
+
+    Starts at the data point closest to all other curves and alternates
+    projections onto the curves (averaging them) until it settles.
+    """
+    curves = [np.asarray(c, dtype=np.float64) for c in curves]
+    best, best_cost = None, np.inf
+    for i, c in enumerate(curves):
+        cost = np.zeros(len(c))
+        for j, other in enumerate(curves):
+            if j != i:
+                cost += np.sum((_closest_on_polyline(c, other) - c) ** 2, axis=1)
+        k = int(np.argmin(cost))
+        if cost[k] < best_cost:
+            best, best_cost = c[k], cost[k]
+    x = best.copy()
+    for _ in range(50):
+        proj = np.array([_closest_on_polyline(x[None], c)[0] for c in curves])
+        new = proj.mean(axis=0)
+        if np.linalg.norm(new - x) < 1e-12 * (1.0 + np.linalg.norm(x)):
+            x = new
+            break
+        x = new
+    return x
+
+
+def check_meeting(data: TactileData) -> np.ndarray:
+    """Check that the curves pass through one point; return that point.
+
+    Each curve must come within 2.5 point spacings of the contact (given, or
+    found by :func:`find_contact`), and the curves' tangents there must span a
+    plane.  Raises :class:`InputError` naming ``data.source``.
+    """
+    contact = data.contact if data.contact is not None else find_contact(data.curves)
+    tol = 2.5 * data.spacing
+    for i, c in enumerate(data.curves):
+        d = float(np.linalg.norm(_closest_on_polyline(contact[None], c)[0] - contact))
+        if d > tol:
+            where = "the given contact" if data.contact is not None else "a common point"
+            raise InputError(f"the curves do not meet: curve {i + 1} passes {d:.4g} from {where} "
+                             f"(more than 2.5 point spacings, {tol:.4g})", data.source)
+    return contact
+
+
+# ---------------------------------------------------------------------- curves
+def fit_curve(points: np.ndarray, contact: np.ndarray, *, window: int | str | None = "auto",
+              degree: int = 2) -> CurveFit:
+    """Fit ``y = a x^2 + b x + c`` in the curve's sampling plane around ``contact``.
+
+    Parameters
+    ----------
+    points : (n, 3) float
+        Ordered points of one curve.
+    contact : (3,) float
+        The point ``p`` at which to differentiate.
+    window : int, ``"auto"`` or None
+        Which points to fit: ``None``, all of them; an integer ``w``, the
+        ``2 w + 1`` points nearest to ``p`` along the curve; ``"auto"``
+        (default), those within ``min(0.3 / kappa, arc / 8)`` of ``p``, where
+        ``arc`` is the curve's length (the parabola's relative curvature bias
+        on a circle is about ``0.21 (h kappa)^2``, 2 % at ``0.3 / kappa``, and
+        the tangent's bias grows with the window too), at least 5 points on
+        each side, refitted twice with the new kappa.
+    degree : int
+        Degree of the fitted polynomial: 2 is the paper's parabola; 3 or 4
+        remove the bias that the curve's higher-order terms put into the
+        tangent and curvature, at the price of more sensitivity to noise.
+    """
+    points = np.asarray(points, dtype=np.float64)
+    i0 = int(np.argmin(np.linalg.norm(points - contact, axis=1)))
+    if window == "auto":
+        arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
+        cap = arc[-1] / 8.0
+        arc = np.abs(arc - arc[i0])
+        keep = arc <= cap
+        keep[max(0, i0 - 5): i0 + 6] = True
+        fit = _fit_polynomial(points[keep], contact, degree)
+        for _ in range(2):
+            half = min(0.3 / max(fit.curvature, 1e-300), cap)
+            keep = arc <= half
+            keep[max(0, i0 - 5): i0 + 6] = True
+            if keep.all():
+                break
+            fit = _fit_polynomial(points[keep], contact, degree)
+        return fit
+    if window is not None:
+        points = points[max(0, i0 - int(window)): i0 + int(window) + 1]
+    return _fit_polynomial(points, contact, degree)
+
+
+def _fit_polynomial(points: np.ndarray, contact: np.ndarray, degree: int) -> CurveFit:
+    centred = points - points.mean(axis=0)
+    _, _, vt = np.linalg.svd(centred, full_matrices=False)
+    e1, plane_normal = vt[0], vt[2]
+    e2 = np.cross(plane_normal, e1)
+    rel = points - contact
+    x, y = rel @ e1, rel @ e2
+    h = float(np.max(np.abs(x))) or 1.0
+    X = x / h
+    if degree < 2:
+        raise ValueError("the fitted polynomial needs degree 2 or more")
+    A = np.vander(X, degree + 1, increasing=True)              # 1, X, X^2, ...
+    coef, _, rank, _ = np.linalg.lstsq(A, y, rcond=None)
+    if rank < degree + 1:
+        raise ValueError(f"too few distinct points to fit a polynomial of degree {degree}")
+    slope = coef[1] / h
+    second = 2.0 * coef[2] / (h * h)
+    norm = np.sqrt(1.0 + slope * slope)
+    tangent = (e1 + slope * e2) / norm
+    curvature = abs(second) / norm**3
+    pn2 = np.sign(second) * np.array([-slope, 1.0]) / norm if second != 0 else np.array([-slope, 1.0]) / norm
+    principal_normal = pn2[0] * e1 + pn2[1] * e2
+    return CurveFit(tangent, principal_normal, float(curvature), plane_normal)
+
+
+def data_normal(tangents: np.ndarray) -> np.ndarray:
+    """Unit ``N`` minimising ``sum_i (N . T_i)^2`` (eq. 1): the eigenvector of
+    ``sum T_i T_i^T`` with the smallest eigenvalue."""
+    T = np.asarray(tangents, dtype=np.float64)
+    w, v = np.linalg.eigh(T.T @ T)
+    return v[:, 0]
+
+
+# ---------------------------------------------------------------------- curvatures
+def _tangent_angles(tangents: np.ndarray, normal: np.ndarray):
+    b1 = tangents[0] - (tangents[0] @ normal) * normal
+    b1 /= np.linalg.norm(b1)
+    b2 = np.cross(normal, b1)
+    psi = np.arctan2(tangents @ b2, tangents @ b1)
+    return psi, b1, b2
+
+
+def principal_curvatures(tangents: np.ndarray, normal: np.ndarray, kn: np.ndarray, *,
+                         method: str = "auto") -> tuple[float, float, np.ndarray]:
+    """Principal curvatures from normal curvatures along known tangents (Euler).
+
+    Parameters
+    ----------
+    tangents : (k, 3) unit tangents ``T_i`` (k >= 3)
+    normal : (3,) unit normal ``N``
+    kn : (k,) normal curvatures along ``T_i``
+    method : ``"closed-form"`` (paper eqs. 5-6, exactly three curves),
+        ``"least-squares"`` (any k >= 3) or ``"auto"`` (closed form for three).
+
+    Returns
+    -------
+    k1, k2 : float, ``k1 >= k2``
+    directions : (2, 3) principal directions, ``d1 x d2 = N``
+    """
+    tangents = np.asarray(tangents, dtype=np.float64)
+    kn = np.asarray(kn, dtype=np.float64)
+    psi, b1, b2 = _tangent_angles(tangents, normal)
+    if method == "auto":
+        method = "closed-form" if len(kn) == 3 else "least-squares"
+    result = None
+    if method == "closed-form":
+        if len(kn) != 3:
+            raise ValueError("the closed form (eqs. 5-6) takes exactly three curves")
+        result = _closed_form(psi, kn)
+    elif method != "least-squares":
+        raise ValueError(f"unknown method {method!r}")
+    if result is None:
+        A = np.stack([np.ones_like(psi), np.cos(2 * psi), np.sin(2 * psi)], axis=1)
+        (H, B, C), *_ = np.linalg.lstsq(A, kn, rcond=None)
+        R = np.hypot(B, C)
+        k1, k2, angle = H + R, H - R, 0.5 * np.arctan2(C, B)
+    else:
+        k1, k2, angle = result
+    d1 = np.cos(angle) * b1 + np.sin(angle) * b2
+    d2 = np.cross(normal, d1)
+    return float(k1), float(k2), np.stack([d1, d2])
+
+
+def _closed_form(psi: np.ndarray, kn: np.ndarray):
+    """Eqs. (5)-(6): solve eqs. (2)-(4) for theta, k1, k2.
+
+    ``theta_1, theta_2`` are the angles from ``T_alpha`` to ``T_beta``,
+    ``T_gamma``; from (2)-(4),
+    ``tan 2 theta = (B sin t1 - A sin t2) / (A cos t2 - B cos t1)`` with
+    ``A = (ka - kb) sin t2``, ``B = (ka - kg) sin t1``; then eq. (6).
+    Returns ``None`` where the system is degenerate.
+    """
+    ka, kb, kg = kn
+    t1, t2 = psi[1] - psi[0], psi[2] - psi[0]
+    A = (ka - kb) * np.sin(t2)
+    B = (ka - kg) * np.sin(t1)
+    theta = 0.5 * np.arctan2(B * np.sin(t1) - A * np.sin(t2), A * np.cos(t2) - B * np.cos(t1))
+    den = np.cos(theta) ** 2 * np.sin(theta + t1) ** 2 - np.cos(theta + t1) ** 2 * np.sin(theta) ** 2
+    if abs(den) < 1e-9:
+        return None
+    k1 = (ka * np.sin(theta + t1) ** 2 - kb * np.sin(theta) ** 2) / den
+    k2 = (kb * np.cos(theta) ** 2 - ka * np.cos(theta + t1) ** 2) / den
+    # theta is the angle from the k1 direction back to T_alpha: the k1 direction is at -theta
+    angle = psi[0] - theta
+    if k1 < k2:
+        k1, k2, angle = k2, k1, angle + 0.5 * np.pi
+    return k1, k2, angle
+
+
+# ---------------------------------------------------------------------- all together
+def estimate(data: TactileData, *, window: int | str | None = "auto", degree: int = 2,
+             method: str = "auto") -> LocalGeometry:
+    """Normal and principal curvatures at the contact point of ``data``.
+
+    If ``data.outward`` is given, ``N`` points along it; otherwise ``N`` is
+    chosen so that the curves bend away from it (a convex guess) and callers
+    should also try :meth:`LocalGeometry.flipped`.
+    """
+    contact = data.contact if data.contact is not None else find_contact(data.curves)
+    try:
+        fits = [fit_curve(c, contact, window=window, degree=degree) for c in data.curves]
+    except ValueError as exc:
+        raise InputError(str(exc), data.source) from None
+    tangents = np.array([f.tangent for f in fits])
+    w = np.linalg.eigvalsh(tangents.T @ tangents)
+    if w[1] < 0.02 * w[2]:
+        raise InputError("the curves are (nearly) tangent to one another at the contact: "
+                         "their planes must cross at distinct angles", data.source)
+    normal = data_normal(tangents)
+    if data.outward is not None:
+        oriented = True
+        if normal @ data.outward < 0:
+            normal = -normal
+    else:
+        oriented = False
+        offsets = np.concatenate([(c - contact) @ normal for c in data.curves])
+        if np.mean(offsets) > 0:
+            normal = -normal
+    kn = np.array([f.curvature * (f.principal_normal @ normal) for f in fits])
+    k1, k2, directions = principal_curvatures(tangents, normal, kn, method=method)
+    return LocalGeometry(contact, normal, k1, k2, directions, tangents, kn, oriented)

@@ -1,0 +1,248 @@
+"""Tactile data: three or more planar curves meeting at one point (Section 3.1).
+
+Files (INTERFACE.md): JSON with ``curves``, optional ``contact``, ``outward``,
+``units``; or CSV with the header ``curve,x,y,z``.  Everything is validated
+here, at the boundary, and a problem is reported as one
+:class:`~tactrec.errors.InputError` naming the file and what is wrong.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import io
+import json
+import math
+import os
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from ..errors import InputError
+from ..units import unit_scale
+from .atomic import write_text_atomic
+
+__all__ = ["TactileData", "load_touch", "save_touch", "MIN_CURVES", "MIN_POINTS"]
+
+MIN_CURVES = 3
+MIN_POINTS = 5
+
+
+@dataclasses.dataclass(frozen=True)
+class TactileData:
+    """Points along three or more concurrent planar curves, in the sensor's frame.
+
+    Attributes
+    ----------
+    curves : tuple of (n_i, 3) float arrays
+        Ordered points along each curve.
+    contact : (3,) float or None
+        The common point ``p`` of the curves, if known.
+    outward : (3,) float or None
+        A direction pointing away from the object at ``p``, if known.
+    units : str or None
+        Length units of the coordinates (``"mm"``, ``"m"``, ...).
+    meta : dict
+        Anything else the file carried (e.g. ``"truth"`` of a simulated touch).
+    source : str
+        Where the data came from (file name), for messages.
+    """
+
+    curves: tuple[np.ndarray, ...]
+    contact: np.ndarray | None = None
+    outward: np.ndarray | None = None
+    units: str | None = None
+    meta: dict = dataclasses.field(default_factory=dict)
+    source: str = "<data>"
+
+    @classmethod
+    def from_arrays(cls, curves: Sequence, *, contact=None, outward=None, units=None,
+                    meta=None, source: str = "<data>") -> "TactileData":
+        """Validate and build.  Raises :class:`InputError` naming ``source``."""
+        if not isinstance(curves, (list, tuple)) and not (isinstance(curves, np.ndarray) and curves.ndim == 3):
+            raise InputError("'curves' must be a list of curves", source)
+        if len(curves) < MIN_CURVES:
+            raise InputError(f"needs at least {MIN_CURVES} curves, got {len(curves)}", source)
+        arrays = []
+        for i, c in enumerate(curves):
+            arr = _points(c, f"curve {i + 1}", source)
+            if len(arr) < MIN_POINTS:
+                raise InputError(f"curve {i + 1} has {len(arr)} points; at least {MIN_POINTS} are needed", source)
+            steps = np.linalg.norm(np.diff(arr, axis=0), axis=1)
+            if np.all(steps == 0) or np.ptp(arr, axis=0).max() == 0:
+                raise InputError(f"curve {i + 1} has all its points at one place", source)
+            arrays.append(arr)
+        c = None if contact is None else _vector(contact, "contact", source)
+        o = None if outward is None else _vector(outward, "outward", source)
+        if o is not None:
+            norm = np.linalg.norm(o)
+            if norm == 0:
+                raise InputError("'outward' must be a non-zero direction", source)
+            o = o / norm
+        if units is not None:
+            try:
+                unit_scale(units)
+            except ValueError as exc:
+                raise InputError(str(exc), source) from None
+        return cls(tuple(arrays), c, o, units, dict(meta or {}), source)
+
+    @property
+    def points(self) -> np.ndarray:
+        """All points, ``(n, 3)``."""
+        return np.concatenate(self.curves)
+
+    @property
+    def spacing(self) -> float:
+        """Median distance between neighbouring points of a curve."""
+        return float(np.median(np.concatenate([np.linalg.norm(np.diff(c, axis=0), axis=1) for c in self.curves])))
+
+    def transformed(self, rotation: np.ndarray, translation: np.ndarray, *, scale: float = 1.0) -> "TactileData":
+        """The same touch in another frame: ``x -> scale * (R x + t)``."""
+        R = np.asarray(rotation, dtype=np.float64)
+        t = np.asarray(translation, dtype=np.float64)
+        move = lambda p: scale * (p @ R.T + t)  # noqa: E731
+        return dataclasses.replace(
+            self,
+            curves=tuple(move(c) for c in self.curves),
+            contact=None if self.contact is None else move(self.contact),
+            outward=None if self.outward is None else self.outward @ R.T,
+        )
+
+    def to_json(self) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        if self.units is not None:
+            out["units"] = self.units
+        out["curves"] = [c.tolist() for c in self.curves]
+        if self.contact is not None:
+            out["contact"] = self.contact.tolist()
+        if self.outward is not None:
+            out["outward"] = self.outward.tolist()
+        out.update(self.meta)
+        return out
+
+
+def _points(obj, what: str, source: str) -> np.ndarray:
+    if not isinstance(obj, (list, tuple, np.ndarray)):
+        raise InputError(f"{what} must be a list of [x, y, z] points", source)
+    try:
+        arr = np.array(obj, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InputError(f"{what} must be a list of [x, y, z] numbers", source) from None
+    if arr.ndim != 2 or arr.shape[1] != 3:
+        raise InputError(f"{what} must be a list of [x, y, z] points (got shape {arr.shape})", source)
+    bad = ~np.isfinite(arr).all(axis=1)
+    if bad.any():
+        raise InputError(f"{what} point {int(np.argmax(bad)) + 1} is not finite ({arr[bad][0].tolist()})", source)
+    return arr
+
+
+def _vector(obj, what: str, source: str) -> np.ndarray:
+    try:
+        arr = np.array(obj, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InputError(f"'{what}' must be [x, y, z] numbers", source) from None
+    if arr.shape != (3,):
+        raise InputError(f"'{what}' must be [x, y, z] (got {obj!r})", source)
+    if not np.isfinite(arr).all():
+        raise InputError(f"'{what}' is not finite ({arr.tolist()})", source)
+    return arr
+
+
+def _read_text(path: Path) -> str:
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise InputError("no such file", path) from None
+    except IsADirectoryError:
+        raise InputError("is a directory, not a data file", path) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"cannot read file ({exc.__class__.__name__})", path) from None
+    if not text.strip():
+        raise InputError("empty file", path)
+    return text
+
+
+def _parse_json(text: str, source: str) -> TactileData:
+    def no_constant(name):
+        raise InputError(f"not valid JSON: {name} is not a number", source)
+
+    try:
+        obj = json.loads(text, parse_constant=no_constant)
+    except json.JSONDecodeError as exc:
+        raise InputError(f"not valid JSON ({exc.msg} at line {exc.lineno} column {exc.colno})", source) from None
+    if not isinstance(obj, dict):
+        raise InputError("expected a JSON object with 'curves'", source)
+    if "curves" not in obj:
+        raise InputError("missing 'curves'", source)
+    meta = {k: v for k, v in obj.items() if k not in {"curves", "contact", "outward", "units"}}
+    return TactileData.from_arrays(obj["curves"], contact=obj.get("contact"), outward=obj.get("outward"),
+                                   units=obj.get("units"), meta=meta, source=source)
+
+
+def _parse_csv(text: str, source: str) -> TactileData:
+    reader = csv.reader(io.StringIO(text))
+    try:
+        header = [h.strip().lower() for h in next(reader)]
+    except (StopIteration, csv.Error):
+        raise InputError("empty CSV", source) from None
+    if header != ["curve", "x", "y", "z"]:
+        raise InputError(f"CSV header must be 'curve,x,y,z' (got {','.join(header)!r})", source)
+    curves: dict[str, list] = {}
+    extra: dict[str, list] = {}
+    try:
+        for line_no, row in enumerate(reader, start=2):
+            if not row or all(not cell.strip() for cell in row):
+                continue
+            if len(row) != 4:
+                raise InputError(f"line {line_no}: expected 4 fields, got {len(row)}", source)
+            key = row[0].strip()
+            try:
+                point = [float(cell) for cell in row[1:]]
+            except ValueError:
+                raise InputError(f"line {line_no}: coordinates must be numbers (got {row[1:]})", source) from None
+            if not all(math.isfinite(x) for x in point):
+                raise InputError(f"line {line_no}: coordinates are not finite ({point})", source)
+            (extra if key in {"contact", "outward"} else curves).setdefault(key, []).append(point)
+    except csv.Error as exc:
+        raise InputError(f"malformed CSV ({exc})", source) from None
+    for key, pts in extra.items():
+        if len(pts) != 1:
+            raise InputError(f"'{key}' must be given on one line", source)
+    return TactileData.from_arrays(list(curves.values()),
+                                   contact=extra.get("contact", [None])[0],
+                                   outward=extra.get("outward", [None])[0], source=source)
+
+
+def load_touch(path: str | os.PathLike) -> TactileData:
+    """Load a touch from a ``.json`` or ``.csv`` file and validate it.
+
+    The curves must meet at one point (checked here, see
+    :func:`tactrec.estimation.find_contact`).
+    """
+    from ..estimation import check_meeting  # local: estimation imports this module
+
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in {".json", ".csv"}:
+        raise InputError(f"unsupported data format {suffix!r}; expected .json or .csv", path)
+    text = _read_text(path)
+    data = _parse_json(text, str(path)) if suffix == ".json" else _parse_csv(text, str(path))
+    check_meeting(data)
+    return data
+
+
+def save_touch(data: TactileData, path: str | os.PathLike) -> None:
+    """Write a touch as JSON (or CSV, by suffix), atomically."""
+    path = Path(path)
+    if path.suffix.lower() == ".csv":
+        lines = ["curve,x,y,z"]
+        for i, c in enumerate(data.curves, start=1):
+            lines += [f"{i},{x!r},{y!r},{z!r}" for x, y, z in c.tolist()]
+        for key in ("contact", "outward"):
+            vec = getattr(data, key)
+            if vec is not None:
+                lines.append(f"{key},{vec[0]!r},{vec[1]!r},{vec[2]!r}")
+        write_text_atomic(path, "\n".join(lines) + "\n")
+    else:
+        write_text_atomic(path, json.dumps(data.to_json()) + "\n")

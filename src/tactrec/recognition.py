@@ -1,0 +1,128 @@
+"""Recognition: register the touch on every model, rank by error (Section 3.3).
+
+For each model: convert the data to the model's units, look up candidates by
+the estimated principal curvatures (a model with none is rejected, "NC"),
+register from them and keep the registration error ``E(M)``; the model with
+the smallest error is recognised (eq. 9).  When the touch carries no
+``outward`` hint, both orientations of the data normal are tried.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from typing import Iterable
+
+import numpy as np
+
+from .estimation import LocalGeometry, estimate
+from .io.touch import TactileData
+from .registration import DEFAULT_METHOD, Registration, get_registrar
+from .tables import CurvatureTable
+from .units import conversion
+
+__all__ = ["Recognition", "recognize", "register_on_model", "ModelEntry"]
+
+
+@dataclasses.dataclass(frozen=True)
+class ModelEntry:
+    """A model with its lookup table, ready for recognition."""
+
+    model: object
+    table: CurvatureTable
+
+    @property
+    def name(self) -> str:
+        return self.model.name
+
+
+@dataclasses.dataclass(frozen=True)
+class Recognition:
+    """Outcome of recognising one touch against a set of models.
+
+    Attributes
+    ----------
+    best : str or None
+        Name of the recognised model (``None`` if every model was rejected).
+    ranking : list of Registration
+        Sorted by error, rejected models last.
+    estimate : LocalGeometry
+        Contact, normal and principal curvatures estimated from the data.
+    seconds : float
+        Wall time of the recognition.
+    method : str
+    """
+
+    best: str | None
+    ranking: list[Registration]
+    estimate: LocalGeometry
+    seconds: float
+    method: str
+
+    @property
+    def registration(self) -> Registration | None:
+        return self.ranking[0] if self.ranking and self.ranking[0].ok else None
+
+    def to_json(self) -> dict:
+        """The result of INTERFACE.md (``tactrec recognize --json``)."""
+        return {
+            "best": self.best,
+            "ranking": [r.to_json() for r in self.ranking],
+            "contact": self.estimate.contact.tolist(),
+            "normal": (self.estimate.normal * (self.registration.normal_sign if self.registration else 1)).tolist(),
+            "curvatures": [self.estimate.k1, self.estimate.k2],
+            "method": self.method,
+            "seconds": round(self.seconds, 4),
+        }
+
+
+def _scaled(geom: LocalGeometry, scale: float) -> LocalGeometry:
+    if scale == 1.0:
+        return geom
+    return dataclasses.replace(geom, contact=geom.contact * scale, k1=geom.k1 / scale, k2=geom.k2 / scale,
+                               normal_curvatures=geom.normal_curvatures / scale)
+
+
+def register_on_model(entry: ModelEntry, data: TactileData, geom: LocalGeometry, *,
+                      method: str = DEFAULT_METHOD, **options) -> Registration:
+    """Register one touch on one model, trying both normals if not oriented."""
+    model = entry.model
+    scale = conversion(data.units, getattr(model, "units", None))
+    points = data.points * scale
+    register = get_registrar(method, model.kind)
+    orientations = [(1, geom)] if geom.oriented else [(1, geom), (-1, geom.flipped())]
+    results = []
+    for sign, g in orientations:
+        r = register(model, entry.table, _scaled(g, scale), points, **options)
+        results.append(dataclasses.replace(r, normal_sign=sign, scale=scale))
+    ok = [r for r in results if r.ok]
+    if not ok:
+        return Registration.rejection(model.name, results[0].rejected, scale=scale)
+    best = min(ok, key=lambda r: r.error)
+    total = sum(r.candidates for r in results)
+    return dataclasses.replace(best, candidates=total)
+
+
+def recognize(data: TactileData, models: Iterable[ModelEntry], *, method: str = DEFAULT_METHOD,
+              window: int | str | None = "auto", degree: int = 2, curvature_method: str = "auto",
+              **options) -> Recognition:
+    """Recognise a touch against ``models`` (Section 3.3).
+
+    Parameters
+    ----------
+    data : TactileData
+    models : iterable of ModelEntry
+        Models with their lookup tables (see :mod:`tactrec.database`).
+    method : str
+        Registration method (``"paper"``).
+    window, degree, curvature_method
+        Passed to :func:`tactrec.estimation.estimate`.
+    **options
+        Passed to the registration (e.g. ``delta``).
+    """
+    start = time.perf_counter()
+    geom = estimate(data, window=window, degree=degree, method=curvature_method)
+    ranking = [register_on_model(entry, data, geom, method=method, **options) for entry in models]
+    ranking.sort(key=lambda r: (not r.ok, r.error if r.ok else 0.0, r.model))
+    best = ranking[0].model if ranking and ranking[0].ok else None
+    return Recognition(best, ranking, geom, time.perf_counter() - start, method)

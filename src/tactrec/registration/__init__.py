@@ -1,0 +1,40 @@
+"""Registration of data curves onto models (paper Sections 3.2.2, 4.2, 5.3).
+
+:data:`METHODS` maps a method name and a model kind to a registration
+function ``register(model, table, geometry, points, **options) ->
+Registration``.  A new method or model kind adds its module and one line here.
+"""
+
+from __future__ import annotations
+
+from typing import Callable
+
+from . import closedform_paper
+from .result import Registration, local_frame
+
+__all__ = ["METHODS", "DEFAULT_METHOD", "Registration", "local_frame", "get_registrar", "method_defaults"]
+
+METHODS: dict[str, dict[str, Callable[..., Registration]]] = {
+    "paper": {"closed-form": closedform_paper.register},
+}
+
+#: per method and model kind, the default options (e.g. the lookup tolerance)
+DEFAULTS: dict[str, dict[str, dict]] = {
+    "paper": {"closed-form": closedform_paper.DEFAULTS},
+}
+
+DEFAULT_METHOD = "paper"
+
+
+def get_registrar(method: str, kind: str) -> Callable[..., Registration]:
+    """The registration function of ``method`` for models of ``kind``."""
+    if method not in METHODS:
+        raise ValueError(f"unknown method {method!r}; available: {', '.join(METHODS)}")
+    by_kind = METHODS[method]
+    if kind not in by_kind:
+        raise ValueError(f"method {method!r} does not handle {kind} models")
+    return by_kind[kind]
+
+
+def method_defaults(method: str, kind: str) -> dict:
+    return dict(DEFAULTS.get(method, {}).get(kind, {}))

@@ -1,0 +1,87 @@
+"""Result of registering a touch onto one model."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+__all__ = ["Registration", "local_frame"]
+
+
+@dataclasses.dataclass(frozen=True)
+class Registration:
+    """Best superposition of the data curves onto one model (eq. 12).
+
+    Attributes
+    ----------
+    model : str
+    error : float
+        Registration error ``E(M)``: mean distance of the data points to the
+        model (model units), or ``inf`` if the model was rejected.
+    location : (3,) float
+        Where the contact point lies on the model, model frame.
+    rotation : (3, 3) float
+        ``data2model`` rotation: ``model = scale * rotation @ data + translation``.
+    translation : (3,) float
+    scale : float
+        Data-to-model unit conversion (1 when both use the same units).
+    candidates : int
+        Table rows the search started from.
+    site : (s,) float
+        Model-specific location (``(u, v)`` on a closed-form surface).
+    normal_sign : int
+        +1 if the data normal was used as estimated, -1 if reversed.
+    rejected : str or None
+        Why the model was rejected (e.g. ``"no candidates"``).
+    """
+
+    model: str
+    error: float
+    location: np.ndarray | None = None
+    rotation: np.ndarray | None = None
+    translation: np.ndarray | None = None
+    scale: float = 1.0
+    candidates: int = 0
+    site: np.ndarray | None = None
+    normal_sign: int = 1
+    rejected: str | None = None
+
+    @classmethod
+    def rejection(cls, model: str, reason: str, *, scale: float = 1.0) -> "Registration":
+        return cls(model=model, error=float("inf"), scale=scale, rejected=reason)
+
+    @property
+    def ok(self) -> bool:
+        return self.rejected is None
+
+    def to_json(self) -> dict:
+        if not self.ok:
+            return {"model": self.model, "error": None, "rejected": self.rejected}
+        out = {
+            "model": self.model,
+            "error": float(self.error),
+            "location": np.asarray(self.location).tolist(),
+            "rotation": np.asarray(self.rotation).tolist(),
+            "translation": np.asarray(self.translation).tolist(),
+            "candidates": int(self.candidates),
+        }
+        if self.scale != 1.0:
+            out["scale"] = float(self.scale)
+        if self.site is not None:
+            out["site"] = np.asarray(self.site).tolist()
+        return out
+
+
+def local_frame(normal: np.ndarray, first: np.ndarray | None = None) -> np.ndarray:
+    """Rows ``t1, t2, N``: a right-handed frame with ``N`` last (Section 4.2).
+
+    ``t1`` is ``first`` projected on the tangent plane, or any tangent.
+    """
+    n = np.asarray(normal, dtype=np.float64)
+    n = n / np.linalg.norm(n)
+    if first is None:
+        first = np.eye(3)[int(np.argmin(np.abs(n)))]
+    t1 = first - (first @ n) * n
+    t1 /= np.linalg.norm(t1)
+    return np.stack([t1, np.cross(n, t1), n])

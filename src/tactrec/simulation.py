@@ -1,0 +1,119 @@
+"""Simulated touches (paper Sections 4.3 and 5.4).
+
+``k`` sampling planes through the contact point, each containing the surface
+normal there, adjacent planes ``angle`` apart; points at equal arc-length
+spacing centred on the contact; uniform (``+/- noise``) or Gaussian (sigma
+``noise``) noise on every coordinate; then a random rigid motion, since a
+sensor never reports in the model's frame.  The truth (site, contact, normal
+and the data-to-model pose) is kept in ``data.meta["truth"]``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from .io.touch import TactileData
+from .surfaces.base import SurfaceModel
+
+__all__ = ["simulate_touch", "simulate_random_touch", "random_rigid_motion"]
+
+
+def random_rigid_motion(rng, *, extent: float) -> tuple[np.ndarray, np.ndarray]:
+    """A uniformly random rotation and a translation uniform in ``[-extent, extent]^3``."""
+    rng = np.random.default_rng(rng)
+    R = Rotation.random(random_state=rng).as_matrix()
+    t = rng.uniform(-extent, extent, size=3)
+    return R, t
+
+
+def simulate_touch(model: SurfaceModel, site, *, points: int = 61, spacing: float, angle: float = 60.0,
+                   curves: int = 3, noise: float = 0.0, noise_kind: str = "uniform",
+                   first_direction: float | None = None, outward: bool = True, contact: bool = False,
+                   sensor_frame: bool = True, units: str | None = None, rng=None) -> TactileData:
+    """Simulate one touch at ``site`` of ``model``.
+
+    Parameters
+    ----------
+    model : SurfaceModel
+    site : array
+        Where the curves meet: ``(u, v)`` on a closed-form surface.
+    points : int
+        Points per curve (odd: the contact is the middle point).
+    spacing : float
+        Arc length between neighbouring points, model units.
+    angle : float
+        Degrees between adjacent sampling planes.
+    curves : int
+        Number of curves (>= 3).
+    noise : float
+        Uniform half-width, or Gaussian sigma, added to every coordinate.
+    noise_kind : ``"uniform"`` or ``"gaussian"``
+    first_direction : float, optional
+        Angle (radians) of the first plane's tangent from the site's ``d1``;
+        random by default.
+    outward : bool
+        Include the outward direction (the side the sensor was on).
+    contact : bool
+        Include the (noise-free) contact point.
+    sensor_frame : bool
+        Apply a random rigid motion (default); ``False`` keeps the model frame.
+    rng : seed or Generator
+    """
+    rng = np.random.default_rng(rng)
+    if curves < 3:
+        raise ValueError("a touch needs at least 3 curves")
+    if points < 5:
+        raise ValueError("a curve needs at least 5 points")
+    if noise_kind not in {"uniform", "gaussian"}:
+        raise ValueError(f"unknown noise kind {noise_kind!r}")
+    frame = model.site_frame(site)
+    start = rng.uniform(0.0, 2 * np.pi) if first_direction is None else float(first_direction)
+    angles = start + np.deg2rad(angle) * np.arange(curves)
+    tangents = np.cos(angles)[:, None] * frame.d1 + np.sin(angles)[:, None] * frame.d2
+    if hasattr(model, "plane_sections"):
+        sections = model.plane_sections(frame.site, tangents, spacing=spacing, count=points)
+    else:
+        sections = np.stack([model.plane_section(frame.site, t, spacing=spacing, count=points) for t in tangents])
+    if noise > 0:
+        if noise_kind == "uniform":
+            sections = sections + rng.uniform(-noise, noise, size=sections.shape)
+        else:
+            sections = sections + rng.normal(0.0, noise, size=sections.shape)
+    truth = {
+        "model": model.name,
+        "site": np.asarray(frame.site, dtype=float).tolist(),
+        "contact": frame.point.tolist(),
+        "normal": frame.normal.tolist(),
+    }
+    data = TactileData.from_arrays(list(sections), contact=frame.point if contact else None,
+                                   outward=frame.normal if outward else None, units=units or model.units)
+    if sensor_frame:
+        R, t = random_rigid_motion(rng, extent=model.size)
+        data = data.transformed(R, t)
+        truth["rotation"] = R.T.tolist()            # data -> model
+        truth["translation"] = (-R.T @ t).tolist()
+    else:
+        truth["rotation"] = np.eye(3).tolist()
+        truth["translation"] = [0.0, 0.0, 0.0]
+    truth.update(points=points, spacing=spacing, angle=angle, noise=noise, noise_kind=noise_kind)
+    meta = {"truth": truth}
+    return TactileData.from_arrays(list(data.curves), contact=data.contact, outward=data.outward,
+                                   units=data.units, meta=meta, source=f"<simulated {model.name}>")
+
+
+def simulate_random_touch(model: SurfaceModel, *, rng=None, attempts: int = 200, margin: float = 0.0,
+                          **options) -> TactileData:
+    """A touch at a random site whose curves all stay on the surface."""
+    rng = np.random.default_rng(rng)
+    last = None
+    for _ in range(attempts):
+        if hasattr(model, "random_sites") and margin:
+            site = model.random_sites(1, rng=rng, margin=margin)[0]
+        else:
+            site = model.random_sites(1, rng=rng)[0]
+        try:
+            return simulate_touch(model, site, rng=rng, **options)
+        except ValueError as exc:
+            last = exc
+    raise ValueError(f"no touch on {model.name} stayed on the surface in {attempts} attempts ({last})")
