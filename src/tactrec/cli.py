@@ -159,6 +159,8 @@ def cmd_simulate(args) -> int:
             site = None
         data = (simulate_touch(model, site, rng=rng, **options) if site is not None
                 else simulate_random_touch(model, rng=rng, **options))
+    except InputError:
+        raise  # already names its argument (--at, --uv)
     except ValueError as exc:
         raise InputError(str(exc), args.model) from None
     save_touch(data, args.out)

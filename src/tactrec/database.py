@@ -198,14 +198,12 @@ def build_database(models: Iterable, out: str | os.PathLike, *, quiet: bool = Fa
         raise InputError("exists and is not a folder", out)
     from .surfaces import builtin_path  # noqa: F401  (for the builtin flag below)
 
-    items, built, reused, names = [], [], [], []
+    items, built, reused = [], [], []
     builtin_root = str(Path(builtin_path("ellipsoid")).parent)
-    for path in _progress(paths, total=len(paths), desc="building", quiet=quiet):
-        if not Path(path).is_file():
-            load_model(path)  # raises the right one-line error
+    models = [load_model(path) for path in paths]  # every model is checked before anything is written
+    _check_unique([model.name for model in models], paths)
+    for path, model in _progress(zip(paths, models), total=len(paths), desc="building", quiet=quiet):
         sha = file_sha256(path)
-        model = load_model(path)
-        names.append(model.name)
         prev = old.get(model.name)
         if (prev and prev["source_sha256"] == sha and prev.get("table_version") == TABLE_VERSION
                 and (out / prev["file"]).is_file()
@@ -228,7 +226,6 @@ def build_database(models: Iterable, out: str | os.PathLike, *, quiet: bool = Fa
             "builtin": str(path).startswith(builtin_root),
         })
         built.append(model.name)
-    _check_unique(names, paths)
     index = {"format": FORMAT, "version": VERSION, "models": items}
     write_text_atomic(out / "index.json", json.dumps(index, indent=1) + "\n")
     keep = {item["file"] for item in items}

@@ -157,11 +157,13 @@ def fit_curve(points: np.ndarray, contact: np.ndarray, *, window: int | str | No
     window : int, ``"auto"`` or None
         Which points to fit: ``None``, all of them; an integer ``w``, the
         ``2 w + 1`` points nearest to ``p`` along the curve; ``"auto"``
-        (default), those within ``min(0.3 / kappa, arc / 8)`` of ``p``, where
-        ``arc`` is the curve's length (the parabola's relative curvature bias
-        on a circle is about ``0.21 (h kappa)^2``, 2 % at ``0.3 / kappa``, and
-        the tangent's bias grows with the window too), at least 5 points on
-        each side, refitted twice with the new kappa.
+        (default), the widest window whose estimates agree with those of every
+        narrower one (intersection of confidence intervals, +/- 2 standard
+        errors of the slope and the curvature, with the noise estimated from
+        the curve's third differences), and no wider than ``0.3 / kappa`` (a
+        parabola's relative curvature bias on a circle is about
+        ``0.21 (h kappa)^2``).  A short window is biased by the curve's
+        higher-order terms less, a long one averages noise better.
     degree : int
         Degree of the fitted polynomial: 2 is the paper's parabola; 3 or 4
         remove the bias that the curve's higher-order terms put into the
@@ -170,30 +172,65 @@ def fit_curve(points: np.ndarray, contact: np.ndarray, *, window: int | str | No
     points = np.asarray(points, dtype=np.float64)
     i0 = int(np.argmin(np.linalg.norm(points - contact, axis=1)))
     if window == "auto":
-        arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
-        cap = arc[-1] / 8.0
-        arc = np.abs(arc - arc[i0])
-        keep = arc <= cap
-        keep[max(0, i0 - 5): i0 + 6] = True
-        fit = _fit_polynomial(points[keep], contact, degree)
-        for _ in range(2):
-            half = min(0.3 / max(fit.curvature, 1e-300), cap)
-            keep = arc <= half
-            keep[max(0, i0 - 5): i0 + 6] = True
-            if keep.all():
-                break
-            fit = _fit_polynomial(points[keep], contact, degree)
-        return fit
+        return _fit_adaptive(points, contact, i0, degree)
     if window is not None:
         points = points[max(0, i0 - int(window)): i0 + int(window) + 1]
-    return _fit_polynomial(points, contact, degree)
+    return _fit_polynomial(points, contact, degree)[0]
 
 
-def _fit_polynomial(points: np.ndarray, contact: np.ndarray, degree: int) -> CurveFit:
+GAMMA = 3.5        # half-width of the confidence intervals, in standard errors
+BIAS_LIMIT = 0.3   # windows no wider than this over kappa: a parabola's relative bias ~ 0.21 (h kappa)^2
+
+
+def _noise_level(points: np.ndarray) -> float:
+    """Noise sigma per coordinate from third differences (robust: median absolute value)."""
+    d3 = np.diff(points, n=3, axis=0)
+    if len(d3) == 0:
+        return 0.0
+    # each coordinate of a third difference of white noise has variance 20 sigma^2
+    return float(np.median(np.abs(d3)) / 0.6745 / np.sqrt(20.0))
+
+
+def _fit_adaptive(points: np.ndarray, contact: np.ndarray, i0: int, degree: int) -> CurveFit:
+    sigma = _noise_level(points)
+    plane = _sampling_plane(points)          # the whole curve fixes its plane best
+    n_side = max(i0, len(points) - 1 - i0)
+    widths = sorted({w for w in np.unique(np.round(np.geomspace(4, max(n_side, 4), 12)).astype(int))
+                     if w >= 4} | {n_side})
+    best = None
+    lo = np.array([-np.inf, -np.inf])
+    hi = np.array([np.inf, np.inf])
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
+    for w in widths:
+        sub = points[max(0, i0 - w): i0 + w + 1]
+        if len(sub) < degree + 2:
+            continue
+        if best is not None and w > 5 and min(arc[i0] - arc[max(0, i0 - w)], arc[min(len(arc) - 1, i0 + w)] - arc[i0]) \
+                > BIAS_LIMIT / max(best.curvature, 1e-300):
+            break
+        fit, se = _fit_polynomial(sub, contact, degree, sigma=sigma, plane=plane)
+        value = np.array([fit.slope, fit.signed_second])
+        lo = np.maximum(lo, value - GAMMA * se)
+        hi = np.minimum(hi, value + GAMMA * se)
+        if best is not None and np.any(lo > hi):
+            break
+        best = fit
+    return best if best is not None else _fit_polynomial(points, contact, degree, plane=plane)[0]
+
+
+def _sampling_plane(points: np.ndarray):
+    """In-plane axes ``e1`` (along the curve), ``e2`` and the plane's normal."""
     centred = points - points.mean(axis=0)
     _, _, vt = np.linalg.svd(centred, full_matrices=False)
     e1, plane_normal = vt[0], vt[2]
-    e2 = np.cross(plane_normal, e1)
+    return e1, np.cross(plane_normal, e1), plane_normal
+
+
+def _fit_polynomial(points: np.ndarray, contact: np.ndarray, degree: int, *, sigma: float = 0.0, plane=None):
+    """Least-squares polynomial in the sampling plane (``plane``, or fitted to
+    ``points``); the fit and the standard errors ``(2,)`` of its slope and
+    second derivative at ``contact``."""
+    e1, e2, plane_normal = _sampling_plane(points) if plane is None else plane
     rel = points - contact
     x, y = rel @ e1, rel @ e2
     h = float(np.max(np.abs(x))) or 1.0
@@ -211,7 +248,12 @@ def _fit_polynomial(points: np.ndarray, contact: np.ndarray, degree: int) -> Cur
     curvature = abs(second) / norm**3
     pn2 = np.sign(second) * np.array([-slope, 1.0]) / norm if second != 0 else np.array([-slope, 1.0]) / norm
     principal_normal = pn2[0] * e1 + pn2[1] * e2
-    return CurveFit(tangent, principal_normal, float(curvature), plane_normal)
+    cov = np.linalg.pinv(A.T @ A)
+    se = sigma * np.sqrt(np.array([cov[1, 1] / h**2, 4.0 * cov[2, 2] / h**4]))
+    fit = CurveFit(tangent, principal_normal, float(curvature), plane_normal)
+    object.__setattr__(fit, "slope", float(slope))
+    object.__setattr__(fit, "signed_second", float(second))
+    return fit, se
 
 
 def data_normal(tangents: np.ndarray) -> np.ndarray:
@@ -299,7 +341,7 @@ def _closed_form(psi: np.ndarray, kn: np.ndarray):
 
 
 # ---------------------------------------------------------------------- all together
-def estimate(data: TactileData, *, window: int | str | None = "auto", degree: int = 2,
+def estimate(data: TactileData, *, window: int | str | None = "auto", degree: int = 3,
              method: str = "auto") -> LocalGeometry:
     """Normal and principal curvatures at the contact point of ``data``.
 

@@ -104,7 +104,7 @@ def register_on_model(entry: ModelEntry, data: TactileData, geom: LocalGeometry,
 
 
 def recognize(data: TactileData, models: Iterable[ModelEntry], *, method: str = DEFAULT_METHOD,
-              window: int | str | None = "auto", degree: int = 2, curvature_method: str = "auto",
+              window: int | str | None = "auto", degree: int = 3, curvature_method: str = "auto",
               **options) -> Recognition:
     """Recognise a touch against ``models`` (Section 3.3).
 

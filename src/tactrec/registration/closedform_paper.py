@@ -33,7 +33,7 @@ from .result import Registration, local_frame
 __all__ = ["register", "Superposition", "DEFAULTS"]
 
 DEFAULTS = {
-    "delta": 0.15,          # lookup tolerance, 1/model units (eq. 7)
+    "delta": 0.2,           # lookup tolerance, 1/model units (eq. 7)
     "phi_samples": 36,      # scan of [0, 2 pi) for the initial phi
     "bisections": 15,
     "max_iterations": 100,

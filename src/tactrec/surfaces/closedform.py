@@ -174,7 +174,8 @@ class ClosedFormSurface(SurfaceModel):
         except InputError:
             raise
         except (ValueError, TypeError, KeyError) as exc:
-            raise InputError(str(exc).strip("'\""), source) from None
+            reason = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc  # KeyError's str() adds quotes
+            raise InputError(str(reason), source) from None
 
     # ------------------------------------------------------------------ loading
     @classmethod

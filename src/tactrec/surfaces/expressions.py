@@ -29,7 +29,6 @@ _BINARY = {
     ast.Mult: lambda a, b: a * b,
     ast.Div: lambda a, b: a / b,
     ast.Pow: lambda a, b: a**b,
-    ast.BitXor: lambda a, b: a**b,  # "x^2" is read as a power, as in math
 }
 
 
@@ -72,6 +71,8 @@ def _translate(node: ast.AST, symbols: Mapping[str, sp.Expr], text: str) -> sp.E
         if node.id in CONSTANTS:
             return CONSTANTS[node.id]
         raise ValueError(f"unknown name {node.id!r} in {text!r}")
+    if isinstance(node, ast.BinOp) and isinstance(node.op, ast.BitXor):
+        raise ValueError(f"'^' is not a power here; write x**2 in {text!r}")
     if isinstance(node, ast.BinOp) and type(node.op) in _BINARY:
         left = _translate(node.left, symbols, text)
         right = _translate(node.right, symbols, text)
@@ -80,11 +81,12 @@ def _translate(node: ast.AST, symbols: Mapping[str, sp.Expr], text: str) -> sp.E
         operand = _translate(node.operand, symbols, text)
         return -operand if isinstance(node.op, ast.USub) else operand
     if isinstance(node, ast.Call):
-        if not isinstance(node.func, ast.Name) or node.func.id not in FUNCTIONS:
-            name = getattr(node.func, "id", "?")
-            raise ValueError(f"unknown function {name!r} in {text!r}")
+        if not isinstance(node.func, ast.Name):
+            raise ValueError(f"calling {ast.unparse(node.func)!r} is not allowed in {text!r}")
+        if node.func.id not in FUNCTIONS:
+            raise ValueError(f"unknown function {node.func.id!r} in {text!r}")
         if node.keywords:
             raise ValueError(f"keyword arguments are not allowed in {text!r}")
         args = [_translate(arg, symbols, text) for arg in node.args]
         return FUNCTIONS[node.func.id](*args)
-    raise ValueError(f"unsupported syntax {type(node).__name__} in {text!r}")
+    raise ValueError(f"{type(node).__name__} syntax is not allowed in {text!r}")

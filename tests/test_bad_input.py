@@ -1,0 +1,541 @@
+"""Bad input to the ``tactrec`` command.
+
+Every kind of bad input (a data file, a model file, a database, an argument)
+must give exit status 2 and exactly one line on stderr that names the
+offending file (or argument) and says what is wrong: never a traceback, and
+never a half-written output file.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from tactrec.cli import main
+
+# ---------------------------------------------------------------------- helpers
+
+
+def bad(capsys, argv, name, problem):
+    """Run ``tactrec argv``; check the exit status and the one line on stderr.
+
+    ``name`` (a file, an argument) and ``problem`` (a phrase saying what is
+    wrong, compared without case) must both appear in that line.
+    """
+    rc = main([str(a) for a in argv])
+    captured = capsys.readouterr()
+    err = captured.err
+    assert "Traceback" not in err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, f"expected one line on stderr, got:\n{err}"
+    line = lines[0]
+    assert rc == 2, line
+    assert line.startswith("tactrec: "), line
+    assert str(name) in line, line
+    assert problem.lower() in line.lower(), line
+    assert captured.out == "", captured.out
+    return line
+
+
+def files_in(folder: Path) -> list[str]:
+    return sorted(p.name for p in folder.iterdir()) if folder.exists() else []
+
+
+def simulate_ok(tmp_path: Path, name: str = "ok.json") -> Path:
+    out = tmp_path / name
+    rc = main(["simulate", "monkey-saddle", "--out", str(out), "--uv", "0.1,0.1", "--points", "21",
+               "--spacing", "0.02", "--quiet"])
+    assert rc == 0 and out.is_file()
+    return out
+
+
+@pytest.fixture
+def touch(tmp_path) -> dict:
+    """A valid touch (3 curves x 21 points, with an outward hint), as a JSON object."""
+    obj = json.loads(simulate_ok(tmp_path).read_text())
+    assert len(obj["curves"]) == 3 and all(len(c) == 21 for c in obj["curves"])
+    return obj
+
+
+def recognize(path):
+    return ["recognize", str(path), "--models", "monkey-saddle", "--quiet"]
+
+
+def test_the_valid_touch_is_recognised(tmp_path, capsys):
+    """The touch all data cases start from is good: only the corruption makes them fail."""
+    path = simulate_ok(tmp_path)
+    assert main(recognize(path)) == 0
+    assert capsys.readouterr().err == ""
+
+
+# ---------------------------------------------------------------------- 1. data files
+
+
+def test_data_missing_file(tmp_path, capsys):
+    path = tmp_path / "absent.json"
+    bad(capsys, recognize(path), path, "no such file")
+
+
+def test_data_empty_file(tmp_path, capsys):
+    path = tmp_path / "empty.json"
+    path.write_text("")
+    bad(capsys, recognize(path), path, "empty")
+
+
+def test_data_invalid_json(tmp_path, capsys):
+    path = tmp_path / "broken.json"
+    path.write_text('{"curves": [[[0, 0, 0], [1, 2, 3]]')
+    bad(capsys, recognize(path), path, "not valid JSON")
+
+
+def test_data_not_utf8(tmp_path, capsys):
+    path = tmp_path / "binary.json"
+    path.write_bytes(b"\xff\xfe\x00\x81 not text \x80")
+    bad(capsys, recognize(path), path, "cannot read")
+
+
+def _drop_curves(t):
+    del t["curves"]
+
+
+def _two_curves(t):
+    t["curves"] = t["curves"][:2]
+
+
+def _three_points(t):
+    t["curves"][0] = t["curves"][0][:3]
+
+
+def _nan_point(t):
+    t["curves"][1][4][2] = float("nan")  # json.dumps writes the literal NaN
+
+
+def _string_point(t):
+    t["curves"][1][4][0] = "abc"
+
+
+def _two_coordinates(t):
+    t["curves"][2][7] = t["curves"][2][7][:2]
+
+
+def _all_points_two_coordinates(t):
+    t["curves"][2] = [p[:2] for p in t["curves"][2]]
+
+
+def _unknown_units(t):
+    t["units"] = "furlong"
+
+
+def _curves_apart(t):
+    t["curves"][2] = [[x + 50.0, y, z] for x, y, z in t["curves"][2]]
+
+
+def _contact_far(t):
+    t["contact"] = [100.0, 100.0, 100.0]
+
+
+def _zero_outward(t):
+    t["outward"] = [0.0, 0.0, 0.0]
+
+
+def _outward_two_numbers(t):
+    t["outward"] = [0.0, 1.0]
+
+
+def _one_place(t):
+    t["curves"][1] = [list(t["curves"][1][0]) for _ in t["curves"][1]]
+
+
+def _curves_not_a_list(t):
+    t["curves"] = "three curves"
+
+
+@pytest.mark.parametrize("corrupt, problem", [
+    (_drop_curves, "missing 'curves'"),
+    (_two_curves, "at least 3 curves"),
+    (_three_points, "curve 1 has 3 points"),
+    (_nan_point, "NaN"),
+    (_string_point, "curve 2"),
+    (_two_coordinates, "curve 3"),
+    (_all_points_two_coordinates, "curve 3"),
+    (_unknown_units, "furlong"),
+    (_curves_apart, "do not meet"),
+    (_contact_far, "do not meet"),
+    (_zero_outward, "outward"),
+    (_outward_two_numbers, "outward"),
+    (_one_place, "one place"),
+    (_curves_not_a_list, "'curves' must be a list"),
+], ids=lambda x: x.__name__.strip("_") if callable(x) else None)
+def test_data_bad_json_content(tmp_path, capsys, touch, corrupt, problem):
+    corrupt(touch)
+    path = tmp_path / "bad.json"
+    text = json.dumps(touch)
+    if corrupt is _nan_point:
+        assert "NaN" in text
+    path.write_text(text)
+    bad(capsys, recognize(path), path, problem)
+
+
+def test_data_json_is_a_list(tmp_path, capsys, touch):
+    path = tmp_path / "list.json"
+    path.write_text(json.dumps(touch["curves"]))
+    bad(capsys, recognize(path), path, "expected a JSON object")
+
+
+def test_data_unsupported_suffix(tmp_path, capsys, touch):
+    path = tmp_path / "touch.txt"
+    path.write_text(json.dumps(touch))
+    bad(capsys, recognize(path), path, "unsupported data format '.txt'")
+
+
+def _csv(touch, header="curve,x,y,z"):
+    lines = [header]
+    for i, c in enumerate(touch["curves"], start=1):
+        lines += [f"{i},{x!r},{y!r},{z!r}" for x, y, z in c]
+    return lines
+
+
+def test_data_csv_is_good_before_corruption(tmp_path, capsys, touch):
+    path = tmp_path / "ok.csv"
+    path.write_text("\n".join(_csv(touch)) + "\n")
+    assert main(recognize(path)) == 0
+    assert capsys.readouterr().err == ""
+
+
+@pytest.mark.parametrize("header", ["x,y,z", "curve,x,y", "id,x,y,z", "curve,x,y,z,w"])
+def test_data_csv_wrong_header(tmp_path, capsys, touch, header):
+    path = tmp_path / "bad.csv"
+    lines = _csv(touch, header)
+    path.write_text("\n".join(lines) + "\n")
+    bad(capsys, recognize(path), path, "header")
+
+
+@pytest.mark.parametrize("value", ["abc", "", "1,5"])
+def test_data_csv_non_numeric_coordinate(tmp_path, capsys, touch, value):
+    path = tmp_path / "bad.csv"
+    lines = _csv(touch)
+    curve, x, y, z = lines[10].split(",")
+    lines[10] = ",".join([curve, x, f'"{value}"', z])
+    path.write_text("\n".join(lines) + "\n")
+    bad(capsys, recognize(path), path, "line 11")
+
+
+def test_data_csv_wrong_field_count(tmp_path, capsys, touch):
+    path = tmp_path / "bad.csv"
+    lines = _csv(touch)
+    lines[5] += ",7"
+    path.write_text("\n".join(lines) + "\n")
+    bad(capsys, recognize(path), path, "line 6")
+
+
+def test_data_csv_all_points_identical(tmp_path, capsys, touch):
+    touch["curves"][0] = [touch["curves"][0][3]] * len(touch["curves"][0])
+    path = tmp_path / "bad.csv"
+    path.write_text("\n".join(_csv(touch)) + "\n")
+    bad(capsys, recognize(path), path, "curve 1 has all its points at one place")
+
+
+def test_data_first_bad_file_of_several_is_named(tmp_path, capsys, touch):
+    good = simulate_ok(tmp_path, "good.json")
+    broken = tmp_path / "broken.json"
+    broken.write_text("{")
+    line = bad(capsys, ["recognize", good, broken, "--models", "monkey-saddle", "--quiet"], broken, "JSON")
+    assert str(good) not in line
+
+
+# ---------------------------------------------------------------------- 2. model files
+
+GOOD_MODEL = """\
+name = "saddle"
+[parametric]
+x = "u"
+y = "v"
+z = "u*v"
+u = [-1, 1]
+v = [-1, 1]
+[implicit]
+f = "x*y - z"
+[table]
+resolution = [8, 8]
+"""
+
+
+def _model_commands(model, tmp_path, data=None):
+    return {
+        "simulate": ["simulate", model, "--out", tmp_path / "out.json", "--points", "21", "--spacing", "0.02",
+                     "--quiet"],
+        "build": ["build", model, "--out", tmp_path / "db", "--quiet"],
+        "recognize": ["recognize", data, "--models", model, "--quiet"],
+    }
+
+
+@pytest.fixture(params=["simulate", "build", "recognize"])
+def model_command(request, tmp_path):
+    """A function taking a model spec and returning an argv that loads it."""
+    data = simulate_ok(tmp_path, "data.json") if request.param == "recognize" else None
+    return lambda model: _model_commands(model, tmp_path, data)[request.param]
+
+
+def test_the_good_model_works(tmp_path, capsys, model_command):
+    path = tmp_path / "saddle.toml"
+    path.write_text(GOOD_MODEL)
+    assert main([str(a) for a in model_command(path)]) == 0
+    assert capsys.readouterr().err == ""
+
+
+def test_model_missing_file(tmp_path, capsys, model_command):
+    path = tmp_path / "absent.toml"
+    bad(capsys, model_command(path), path, "no such file")
+
+
+def test_model_unknown_builtin(tmp_path, capsys, model_command):
+    bad(capsys, model_command("no-such-model"), "no-such-model", "no such file or built-in model")
+
+
+def test_model_unknown_format(tmp_path, capsys, model_command):
+    path = tmp_path / "saddle.xyz"
+    path.write_text(GOOD_MODEL)
+    bad(capsys, model_command(path), path, "unsupported model format '.xyz'")
+
+
+@pytest.mark.parametrize("text, problem", [
+    ("", "empty file"),
+    ("   \n\n", "empty file"),
+    ('name = "saddle"\n[parametric\nx = "u"\n', "not valid TOML"),
+    ('name = \n', "not valid TOML"),
+    (GOOD_MODEL.replace('z = "u*v"', 'z = "u*foo(v)"'), "unknown function 'foo'"),
+    (GOOD_MODEL.replace('f = "x*y - z"', 'f = "x*y - z + 1"'), "implicit f is not zero"),
+    (GOOD_MODEL.replace('f = "x*y - z"', 'f = "x*y + z"'), "implicit f is not zero"),
+    (GOOD_MODEL.replace("u = [-1, 1]", "u = [1, 0]"), "not an interval"),
+    (GOOD_MODEL.replace("v = [-1, 1]", "v = [0, 0]"), "not an interval"),
+    (GOOD_MODEL.replace('z = "u*v"\n', ""), "needs 'z'"),
+    (GOOD_MODEL.replace('z = "u*v"', 'z = "u*v*w"'), "unknown name 'w'"),
+    (GOOD_MODEL.replace('z = "u*v"', 'z = "u*(v"'), "cannot parse"),
+    (GOOD_MODEL.replace('name = "saddle"', 'name = "saddle"\ncolour = "red"'), "unknown key"),
+], ids=["empty", "blank", "toml-table", "toml-value", "unknown-function", "implicit-shifted",
+        "implicit-wrong", "domain-reversed", "domain-empty", "missing-z", "unknown-name", "unbalanced",
+        "unknown-key"])
+def test_model_bad_file(tmp_path, capsys, model_command, text, problem):
+    path = tmp_path / "saddle.toml"
+    path.write_text(text)
+    bad(capsys, model_command(path), path, problem)
+
+
+@pytest.mark.parametrize("key, expression", [
+    ("z", "__import__('os').system('echo hi')"),
+    ("z", "u.real*v"),
+    ("f", "x.real*y - z"),
+    ("f", "x*y - z + (lambda: 0)()"),
+    ("z", "u*v if u else 0"),
+    ("z", "[u for u in ()]"),
+    ("z", "().__class__.__bases__[0]"),
+    ("f", "sin.__self__"),
+], ids=["import", "attribute-z", "attribute-f", "lambda", "conditional", "comprehension", "dunder",
+        "function-attribute"])
+def test_model_python_in_expression_is_not_allowed(tmp_path, capfd, key, expression):
+    """Nothing from a model file is run as Python: such expressions are refused, by name."""
+    old = {"z": 'z = "u*v"', "f": 'f = "x*y - z"'}[key]
+    path = tmp_path / "evil.toml"
+    path.write_text(GOOD_MODEL.replace(old, f"{key} = {json.dumps(expression)}"))
+    out = tmp_path / "out.json"
+    bad(capfd, ["simulate", path, "--out", out, "--quiet"], path, "not allowed")
+    assert not out.exists()
+
+
+# ---------------------------------------------------------------------- 3. databases
+
+
+@pytest.fixture
+def db(tmp_path) -> Path:
+    path = tmp_path / "db"
+    assert main(["build", "monkey-saddle", "--out", str(path), "--quiet"]) == 0
+    return path
+
+
+@pytest.fixture
+def data(tmp_path) -> Path:
+    return simulate_ok(tmp_path, "data.json")
+
+
+def test_the_database_works(db, data, capsys):
+    assert main(["recognize", str(data), "--db", str(db), "--quiet"]) == 0
+    assert capsys.readouterr().err == ""
+
+
+def _npz(db: Path) -> Path:
+    (npz,) = db.glob("*.npz")
+    return npz
+
+
+def test_db_missing_folder(tmp_path, data, capsys):
+    path = tmp_path / "no-db"
+    bad(capsys, ["recognize", data, "--db", path], path, "no such database")
+
+
+def test_db_is_a_file(tmp_path, data, capsys):
+    bad(capsys, ["recognize", data, "--db", data], data, "folder")
+
+
+def test_db_without_index(tmp_path, data, capsys):
+    path = tmp_path / "empty-db"
+    path.mkdir()
+    bad(capsys, ["recognize", data, "--db", path], path, "no index.json")
+
+
+@pytest.mark.parametrize("text", ["{not json", "", '{"format": "something-else", "models": []}', "[1, 2]",
+                                  '{"format": "tactrec-db", "version": 1, "models": [{"name": "x"}]}'],
+                         ids=["not-json", "empty", "other-format", "list", "incomplete-entry"])
+def test_db_index_broken(db, data, capsys, text):
+    index = db / "index.json"
+    index.write_text(text)
+    bad(capsys, ["recognize", data, "--db", db], index, "corrupted database index")
+
+
+def test_db_npz_altered(db, data, capsys):
+    npz = _npz(db)
+    blob = bytearray(npz.read_bytes())
+    for i in range(len(blob) // 2, len(blob) // 2 + 16):
+        blob[i] ^= 0xFF
+    npz.write_bytes(bytes(blob))
+    bad(capsys, ["recognize", data, "--db", db], npz, "checksum")
+
+
+def test_db_npz_truncated(db, data, capsys):
+    npz = _npz(db)
+    npz.write_bytes(npz.read_bytes()[:100])
+    bad(capsys, ["recognize", data, "--db", db], npz, "corrupted database file")
+
+
+def test_db_npz_deleted(db, data, capsys):
+    npz = _npz(db)
+    npz.unlink()
+    bad(capsys, ["recognize", data, "--db", db], npz, "missing from the database")
+
+
+# ---------------------------------------------------------------------- 4. arguments
+
+
+def _simulate(tmp_path, *extra):
+    return ["simulate", "monkey-saddle", "--out", tmp_path / "out.json", "--quiet", *extra]
+
+
+@pytest.mark.parametrize("extra, name, problem", [
+    (["--points", "2"], "--points", "at least 5"),
+    (["--points", "many"], "--points", "not a whole number"),
+    (["--spacing", "-1"], "--spacing", "positive"),
+    (["--spacing", "0"], "--spacing", "positive"),
+    (["--spacing", "nan"], "--spacing", "positive"),
+    (["--noise", "-0.1"], "--noise", "non-negative"),
+    (["--curves", "2"], "--curves", "at least 3"),
+    (["--uv", "1,2,3"], "--uv", "expected 2"),
+    (["--uv", "a,b"], "--uv", "expected 2"),
+    (["--uv", "0.1,inf"], "--uv", "finite"),
+    (["--at", "1,2"], "--at", "expected 3"),
+    (["--uv", "0.1,0.1", "--at", "0,0,0"], "--at", "at most one"),
+    (["--noise-kind", "pink"], "--noise-kind", "invalid choice"),
+], ids=["points-2", "points-word", "spacing-negative", "spacing-zero", "spacing-nan", "noise-negative",
+        "curves-2", "uv-three", "uv-words", "uv-inf", "at-two", "uv-and-at", "noise-kind"])
+def test_simulate_bad_argument(tmp_path, capsys, extra, name, problem):
+    bad(capsys, _simulate(tmp_path, *extra), name, problem)
+    assert files_in(tmp_path) == []
+
+
+def test_bad_argument_is_not_blamed_on_the_model(tmp_path, capsys):
+    """``--uv 1,2,3`` is wrong, not the model: the line names the argument first."""
+    line = bad(capsys, _simulate(tmp_path, "--uv", "1,2,3"), "--uv", "expected 2")
+    assert line.startswith("tactrec: --uv: "), line
+
+
+def test_recognize_needs_db_or_models(tmp_path, data, capsys):
+    bad(capsys, ["recognize", data], "--db", "give either --db DB or --models")
+
+
+def test_recognize_not_both_db_and_models(db, data, capsys):
+    bad(capsys, ["recognize", data, "--db", db, "--models", "monkey-saddle"], "--db", "give either")
+
+
+def test_recognize_bad_delta(data, capsys):
+    bad(capsys, ["recognize", data, "--models", "monkey-saddle", "--delta", "-2"], "--delta", "positive")
+
+
+def test_bench_unknown_benchmark(tmp_path, capsys):
+    bad(capsys, ["bench", "no-such-benchmark", "--out", tmp_path / "bench"], "no-such-benchmark",
+        "unknown benchmark")
+    assert files_in(tmp_path) == []
+
+
+@pytest.mark.parametrize("argv, name, problem", [
+    ([], "command", "required"),
+    (["simulate", "monkey-saddle"], "--out", "required"),
+    (["simulate"], "MODEL", "required"),
+    (["build", "monkey-saddle"], "--out", "required"),
+    (["build", "--out", "db"], "MODEL", "required"),
+    (["recognize", "--models", "monkey-saddle"], "DATA", "required"),
+    (["bench"], "NAME", "required"),
+    (["no-such-command"], "no-such-command", "invalid choice"),
+    (["simulate", "monkey-saddle", "--out", "x.json", "--colour", "red"], "--colour", "unrecognized"),
+], ids=["command", "simulate-out", "simulate-model", "build-out", "build-model", "recognize-data", "bench-name",
+        "unknown-command", "unknown-option"])
+def test_missing_or_unknown_argument(tmp_path, capsys, monkeypatch, argv, name, problem):
+    monkeypatch.chdir(tmp_path)
+    bad(capsys, argv, name, problem)
+    assert files_in(tmp_path) == []
+
+
+# ---------------------------------------------------------------------- 5. no half-written output
+
+
+def test_simulate_broken_model_writes_nothing(tmp_path, capsys):
+    model = tmp_path / "broken.toml"
+    model.write_text(GOOD_MODEL.replace('f = "x*y - z"', 'f = "x*y - z + 1"'))
+    out = tmp_path / "out" / "touch.json"
+    bad(capsys, ["simulate", model, "--out", out, "--quiet"], model, "not zero")
+    assert not out.parent.exists()
+    assert files_in(tmp_path) == ["broken.toml"]
+
+
+@pytest.mark.parametrize("suffix", [".json", ".csv"])
+def test_simulate_leaving_the_surface_writes_nothing(tmp_path, capsys, suffix):
+    out = tmp_path / f"touch{suffix}"
+    bad(capsys, ["simulate", "monkey-saddle", "--out", out, "--uv", "0.99,0.99", "--spacing", "0.05",
+                 "--points", "61", "--quiet"], "monkey-saddle", "leaves the surface")
+    assert files_in(tmp_path) == []
+
+
+def test_simulate_failure_keeps_an_existing_output(tmp_path, capsys):
+    out = tmp_path / "touch.json"
+    out.write_text("old contents\n")
+    bad(capsys, ["simulate", "monkey-saddle", "--out", out, "--uv", "0.99,0.99", "--spacing", "0.05",
+                 "--points", "61", "--quiet"], "monkey-saddle", "leaves the surface")
+    assert out.read_text() == "old contents\n"
+    assert files_in(tmp_path) == ["touch.json"]
+
+
+def test_build_with_a_broken_model_writes_nothing(tmp_path, capsys):
+    """A good model before a broken one must not leave a database without an index."""
+    model = tmp_path / "broken.toml"
+    model.write_text(GOOD_MODEL.replace("u = [-1, 1]", "u = [1, 0]"))
+    out = tmp_path / "db"
+    bad(capsys, ["build", "monkey-saddle", model, "--out", out, "--quiet"], model, "not an interval")
+    assert files_in(out) == []
+
+
+def test_build_with_two_models_of_one_name_writes_nothing(tmp_path, capsys):
+    copy = tmp_path / "copy.toml"
+    copy.write_text(GOOD_MODEL.replace('name = "saddle"', 'name = "monkey-saddle"'))
+    out = tmp_path / "db"
+    bad(capsys, ["build", "monkey-saddle", copy, "--out", out, "--quiet"], copy, "two models are named")
+    assert files_in(out) == []
+
+
+def test_failed_rebuild_keeps_the_database(db, data, tmp_path, capsys):
+    before = {p.name: p.read_bytes() for p in db.iterdir()}
+    good = tmp_path / "saddle.toml"
+    good.write_text(GOOD_MODEL)
+    model = tmp_path / "broken.toml"
+    model.write_text("")
+    bad(capsys, ["build", good, model, "--out", db, "--quiet"], model, "empty file")
+    assert {p.name: p.read_bytes() for p in db.iterdir()} == before
+    assert main(["recognize", str(data), "--db", str(db), "--quiet"]) == 0

@@ -1,0 +1,89 @@
+"""Normal and principal curvatures at the contact point (paper Section 3.1, METHOD section 2)."""
+
+import numpy as np
+import pytest
+
+from tactrec.estimation import estimate, find_contact, principal_curvatures
+from tactrec.simulation import simulate_touch
+from tactrec.surfaces import load_model
+
+UV = (1.21, 0.43)   # the paper's elliptic-paraboloid example (Section 4.3.1)
+
+
+@pytest.fixture(scope="module")
+def paraboloid():
+    m = load_model("elliptic-paraboloid")
+    k1, k2, n, _ = m.curvatures(np.array(UV[0]), np.array(UV[1]))
+    return m, float(k1), float(k2), n
+
+
+def _errors(touch, geom, k1, k2, n):
+    R = np.array(touch.meta["truth"]["rotation"])          # data -> model
+    return np.linalg.norm(R @ geom.normal - n), abs(geom.k1 - k1), abs(geom.k2 - k2)
+
+
+@pytest.mark.parametrize("method", ["closed-form", "least-squares"])
+def test_paper_example_without_noise_within_one_thousandth(paraboloid, method):
+    m, k1, k2, n = paraboloid
+    for seed in range(5):
+        touch = simulate_touch(m, UV, points=61, spacing=0.004, noise=0.0, rng=seed)
+        dn, dk1, dk2 = _errors(touch, estimate(touch, method=method), k1, k2, n)
+        assert dn < 1e-3 and dk1 < 1e-3 and dk2 < 1e-3, (seed, dn, dk1, dk2)
+
+
+def test_higher_degree_fit_removes_the_bias_on_long_curves(paraboloid):
+    m, k1, k2, n = paraboloid
+    touch = simulate_touch(m, UV, points=61, spacing=0.01, noise=0.0, rng=0)
+    biased = _errors(touch, estimate(touch, window=None, degree=2), k1, k2, n)
+    exact = _errors(touch, estimate(touch, window=None, degree=4), k1, k2, n)
+    assert max(biased) > 5e-3 and max(exact) < 1e-3
+
+
+def test_paper_example_with_paper_noise_within_paper_error(paraboloid):
+    """Noise +/-0.001 (the paper's): |dk| <= 0.05, the paper's own error, on 20 seeds."""
+    m, k1, k2, n = paraboloid
+    for seed in range(20):
+        touch = simulate_touch(m, UV, points=61, spacing=0.01, noise=0.001, rng=seed)
+        dn, dk1, dk2 = _errors(touch, estimate(touch), k1, k2, n)
+        assert dk1 <= 0.05 and dk2 <= 0.05 and dn < 0.02, (seed, dn, dk1, dk2)
+
+
+def test_closed_form_equals_least_squares_for_three_curves():
+    rng = np.random.default_rng(3)
+    normal = np.array([0.0, 0.0, 1.0])
+    for _ in range(20):
+        k1, k2 = np.sort(rng.normal(size=2))[::-1]
+        t0 = rng.uniform(0, np.pi)
+        psi = rng.uniform(0, np.pi, size=3)
+        tangents = np.stack([np.cos(psi), np.sin(psi), np.zeros(3)], axis=1)
+        kn = k1 * np.cos(psi - t0) ** 2 + k2 * np.sin(psi - t0) ** 2
+        a = principal_curvatures(tangents, normal, kn, method="closed-form")
+        b = principal_curvatures(tangents, normal, kn, method="least-squares")
+        assert np.allclose(a[:2], (k1, k2)) and np.allclose(b[:2], (k1, k2))
+        d1 = np.array([np.cos(t0), np.sin(t0), 0.0])
+        assert abs(abs(a[2][0] @ d1) - 1) < 1e-9 and abs(abs(b[2][0] @ d1) - 1) < 1e-9
+
+
+def test_more_than_three_curves(paraboloid):
+    m, k1, k2, n = paraboloid
+    touch = simulate_touch(m, UV, points=61, spacing=0.004, curves=5, angle=36.0, rng=1)
+    dn, dk1, dk2 = _errors(touch, estimate(touch), k1, k2, n)
+    assert dn < 1e-3 and dk1 < 1e-3 and dk2 < 1e-3
+
+
+def test_contact_found_from_the_curves(paraboloid):
+    m, *_ = paraboloid
+    touch = simulate_touch(m, UV, points=61, spacing=0.01, noise=0.001, contact=True, rng=4)
+    found = find_contact(touch.curves)
+    assert np.linalg.norm(found - touch.contact) < 2e-3
+
+
+def test_orientation_from_outward_and_flip(paraboloid):
+    m, k1, k2, n = paraboloid
+    touch = simulate_touch(m, UV, points=61, spacing=0.004, rng=2)
+    geom = estimate(touch)
+    assert geom.oriented and geom.normal @ touch.outward > 0
+    flipped = geom.flipped()
+    assert np.allclose(flipped.normal, -geom.normal)
+    assert np.isclose(flipped.k1, -geom.k2) and np.isclose(flipped.k2, -geom.k1)
+    assert np.allclose(np.cross(*flipped.directions), flipped.normal)
