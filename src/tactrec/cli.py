@@ -228,7 +228,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("simulate", help="generate tactile data on a model")
     p.add_argument("model", metavar="MODEL", help="model file or built-in name")
     p.add_argument("--out", required=True, metavar="DATA", help="data file to write (.json or .csv)")
-    p.add_argument("--at", metavar="X,Y,Z", help="contact near this point (model frame)")
+    p.add_argument("--at", metavar="X,Y,Z", help="contact near this point (model frame); write --at=-1,2,3 "
+                   "when the first number is negative")
     p.add_argument("--uv", metavar="U,V", help="contact at these parameters (closed-form surface)")
     p.add_argument("--vertex", type=_count(0), metavar="I", help="contact at this vertex (mesh)")
     p.add_argument("--points", type=_count(5), default=61, help="points per curve (default 61)")

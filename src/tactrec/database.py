@@ -28,7 +28,7 @@ import numpy as np
 from .errors import InputError
 from .io.atomic import atomic_write, write_text_atomic
 from .recognition import ModelEntry
-from .surfaces import KINDS, load_model, resolve_models
+from .surfaces import KINDS, builtin_path, load_model, resolve_models
 from .tables import CurvatureTable
 
 __all__ = ["Database", "BuildReport", "build_database", "load_database", "build_entries", "file_sha256",
@@ -196,8 +196,6 @@ def build_database(models: Iterable, out: str | os.PathLike, *, quiet: bool = Fa
             old = {}  # a broken database is rebuilt from scratch
     elif out.exists() and not out.is_dir():
         raise InputError("exists and is not a folder", out)
-    from .surfaces import builtin_path  # noqa: F401  (for the builtin flag below)
-
     items, built, reused = [], [], []
     builtin_root = str(Path(builtin_path("ellipsoid")).parent)
     models = [load_model(path) for path in paths]  # every model is checked before anything is written

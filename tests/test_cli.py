@@ -1,0 +1,115 @@
+"""The command line end to end: simulate, build, recognize, demo, and the database."""
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tactrec.cli import main
+from tactrec.database import load_database
+
+EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
+
+
+@pytest.mark.slow
+def test_user_surfaces_end_to_end(tmp_path, capsys):
+    """Two surfaces that are not built in (TOML files) work with the built-ins: simulate, build, recognize."""
+    torus, hyper = EXAMPLES / "torus.toml", EXAMPLES / "hyperboloid.toml"
+    t1, t2, t3 = tmp_path / "torus.json", tmp_path / "hyper.csv", tmp_path / "trough.json"
+    assert main(["simulate", str(torus), "--out", str(t1), "--uv", "0.5,2.0", "--spacing", "0.01",
+                 "--noise", "0.0005", "--seed", "1", "--quiet"]) == 0
+    assert main(["simulate", str(hyper), "--out", str(t2), "--uv", "1.0,0.3", "--spacing", "0.02",
+                 "--noise", "0.001", "--seed", "2", "--no-outward", "--quiet"]) == 0
+    assert main(["simulate", "crossed-trough", "--out", str(t3), "--at", "0.4,0.3,0.0144", "--spacing", "0.02",
+                 "--noise", "0.001", "--seed", "3", "--quiet"]) == 0
+    db = tmp_path / "db"
+    assert main(["build", "paper-table1", str(torus), str(hyper), "--out", str(db), "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["recognize", str(t1), str(t2), str(t3), "--db", str(db), "--json"]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    results = [json.loads(line) for line in lines]
+    assert [r["file"] for r in results] == [str(t1), str(t2), str(t3)]
+    assert [r["best"] for r in results] == ["torus", "hyperboloid", "crossed-trough"]
+    truth = json.loads(t1.read_text())["truth"]
+    best = results[0]["ranking"][0]
+    # the torus is symmetric about z: compare the location's distance from the axis and height
+    loc, true = np.array(best["location"]), np.array(truth["contact"])
+    assert abs(np.hypot(*loc[:2]) - np.hypot(*true[:2])) < 0.02 and abs(abs(loc[2]) - abs(true[2])) < 0.02
+
+
+def test_build_reuses_unchanged_and_rebuilds_changed(tmp_path, capsys):
+    src = tmp_path / "hyperboloid.toml"
+    shutil.copy(EXAMPLES / "hyperboloid.toml", src)
+    db = tmp_path / "db"
+    assert main(["build", "monkey-saddle", str(src), "--out", str(db)]) == 0
+    assert "2 built, 0 unchanged" in capsys.readouterr().out
+    assert main(["build", "monkey-saddle", str(src), "--out", str(db)]) == 0
+    assert "0 built, 2 unchanged" in capsys.readouterr().out
+    before = json.loads((db / "index.json").read_text())
+    src.write_text(src.read_text().replace("b = 0.7", "b = 0.75"))
+    assert main(["build", "monkey-saddle", str(src), "--out", str(db)]) == 0
+    out = capsys.readouterr().out
+    assert "1 built, 1 unchanged" in out and "built    hyperboloid" in out
+    after = json.loads((db / "index.json").read_text())
+    old = {m["name"]: m for m in before["models"]}
+    new = {m["name"]: m for m in after["models"]}
+    assert old["monkey-saddle"]["file"] == new["monkey-saddle"]["file"]
+    assert old["hyperboloid"]["source_sha256"] != new["hyperboloid"]["source_sha256"]
+    assert sorted(p.name for p in db.glob("*.npz")) == sorted(m["file"] for m in after["models"])
+    loaded = load_database(db)
+    assert np.isclose(loaded.get("hyperboloid").model.parameters["b"], 0.75)
+
+
+def test_changed_source_is_reported_when_the_database_is_used(tmp_path, capsys):
+    src = tmp_path / "hyperboloid.toml"
+    shutil.copy(EXAMPLES / "hyperboloid.toml", src)
+    db = tmp_path / "db"
+    touch = tmp_path / "t.json"
+    assert main(["build", str(src), "--out", str(db), "--quiet"]) == 0
+    assert main(["simulate", str(src), "--out", str(touch), "--uv", "1,0.2", "--spacing", "0.02", "--quiet"]) == 0
+    src.write_text(src.read_text() + "\n# edited\n")
+    capsys.readouterr()
+    assert main(["recognize", str(touch), "--db", str(db)]) == 0
+    captured = capsys.readouterr()
+    assert "changed since the database was built" in captured.err and "hyperboloid" in captured.out
+
+
+def test_recognize_with_models_matches_db(tmp_path, capsys):
+    touch = tmp_path / "t.json"
+    assert main(["simulate", "monkey-saddle", "--out", str(touch), "--uv=-0.2,0.3", "--spacing", "0.02",
+                 "--noise", "0.001", "--quiet"]) == 0
+    db = tmp_path / "db"
+    assert main(["build", "monkey-saddle", "crossed-trough", "--out", str(db), "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["recognize", str(touch), "--db", str(db), "--json"]) == 0
+    a = json.loads(capsys.readouterr().out)
+    assert main(["recognize", str(touch), "--models", "monkey-saddle", "crossed-trough", "--json"]) == 0
+    b = json.loads(capsys.readouterr().out)
+    assert a["best"] == b["best"] == "monkey-saddle"
+    assert np.isclose(a["ranking"][0]["error"], b["ranking"][0]["error"])
+    assert main(["recognize", str(touch), "--db", str(db)]) == 0
+    assert "best monkey-saddle" in capsys.readouterr().out
+
+
+def test_simulated_file_holds_a_valid_touch_in_the_sensor_frame(tmp_path):
+    out = tmp_path / "t.json"
+    assert main(["simulate", "ellipsoid", "--out", str(out), "--uv", "1.0,1.0", "--points", "21",
+                 "--spacing", "0.02", "--seed", "4", "--quiet"]) == 0
+    data = json.loads(out.read_text())
+    truth = data["truth"]
+    R, t = np.array(truth["rotation"]), np.array(truth["translation"])
+    assert not np.allclose(R, np.eye(3))
+    curves = [np.array(c) for c in data["curves"]]
+    assert len(curves) == 3 and all(len(c) == 21 for c in curves)
+    assert np.allclose(curves[0][10] @ R.T + t, truth["contact"])
+
+
+@pytest.mark.slow
+def test_demo_prints_a_correct_recognition_and_writes_a_picture(tmp_path, capsys):
+    picture = tmp_path / "demo.png"
+    assert main(["demo", "--seed", "1", "--out", str(picture)]) == 0
+    out = capsys.readouterr().out
+    assert "(correct)" in out and "ranking:" in out
+    assert picture.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
