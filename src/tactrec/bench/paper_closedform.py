@@ -165,6 +165,7 @@ def run_table3(*, out, instances: int = 10, seed: int = 0, jobs: int | None = No
              "records": records}
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / "paper-table3.json", table)
+    table["plots"] = [str(_fig8(records, out, "paper-table3"))]
     lines = [f"P2 / Table 3: recognition among {len(SURFACES)} surfaces, {instances} instances each "
              f"(method {method}, seed {seed})",
              f"{'surface':22s} {'correct':>8s} {'lookup':>7s} {'search':>7s}   paper: {'lookup':>6s} {'search':>6s}"

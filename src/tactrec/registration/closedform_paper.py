@@ -237,4 +237,5 @@ def register(model: ClosedFormSurface, table: CurvatureTable, geometry: LocalGeo
     R = jet.frame[0] @ Rz @ L
     q = jet.point[0]
     return Registration(model=model.name, error=float(E[best]), location=q, rotation=R,
-                        translation=q - R @ geometry.contact, candidates=len(idx), site=uv[best])
+                        translation=q - R @ geometry.contact, candidates=len(idx), site=uv[best],
+                        phi=float(phi[best]))

@@ -30,6 +30,9 @@ class Registration:
         Table rows the search started from.
     site : (s,) float
         Model-specific location (``(u, v)`` on a closed-form surface).
+    phi : float or None
+        Rotation of the curves about the model normal at the location, radians
+        (Section 4.2: from the site's ``d1`` to the data's ``t1``).
     normal_sign : int
         +1 if the data normal was used as estimated, -1 if reversed.
     rejected : str or None
@@ -44,6 +47,7 @@ class Registration:
     scale: float = 1.0
     candidates: int = 0
     site: np.ndarray | None = None
+    phi: float | None = None
     normal_sign: int = 1
     rejected: str | None = None
 
@@ -70,6 +74,8 @@ class Registration:
             out["scale"] = float(self.scale)
         if self.site is not None:
             out["site"] = np.asarray(self.site).tolist()
+        if self.phi is not None:
+            out["phi"] = float(self.phi)
         return out
 
 
