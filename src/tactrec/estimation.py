@@ -150,8 +150,8 @@ def check_meeting(data: TactileData) -> np.ndarray:
 
 # ---------------------------------------------------------------------- curves
 def fit_curve(points: np.ndarray, contact: np.ndarray, *, window: int | str | None = "auto",
-              degree: int = 2) -> CurveFit:
-    """Fit ``y = a x^2 + b x + c`` in the curve's sampling plane around ``contact``.
+              degree: int = 3) -> CurveFit:
+    """Fit ``y = a x^2 + b x + c`` (plus higher terms) in the curve's sampling plane around ``contact``.
 
     Parameters
     ----------
@@ -163,16 +163,16 @@ def fit_curve(points: np.ndarray, contact: np.ndarray, *, window: int | str | No
         Which points to fit: ``None``, all of them; an integer ``w``, the
         ``2 w + 1`` points nearest to ``p`` along the curve; ``"auto"``
         (default), the widest window whose estimates agree with those of every
-        narrower one (intersection of confidence intervals, +/- 2 standard
+        narrower one (intersection of confidence intervals, +/- 3.5 standard
         errors of the slope and the curvature, with the noise estimated from
         the curve's third differences), and no wider than ``0.3 / kappa`` (a
         parabola's relative curvature bias on a circle is about
         ``0.21 (h kappa)^2``).  A short window is biased by the curve's
         higher-order terms less, a long one averages noise better.
     degree : int
-        Degree of the fitted polynomial: 2 is the paper's parabola; 3 frees
-        the tangent of the cubic term's bias; 4 the curvature of the quartic
-        term's, at the price of more sensitivity to noise.
+        Degree of the fitted polynomial: 2 is the paper's parabola; 3 (the
+        default) frees the tangent of the cubic term's bias; 4 the curvature
+        of the quartic term's, at the price of more sensitivity to noise.
     """
     points = np.asarray(points, dtype=np.float64)
     i0 = int(np.argmin(np.linalg.norm(points - contact, axis=1)))
@@ -213,8 +213,7 @@ def _fit_adaptive(points: np.ndarray, contact: np.ndarray, i0: int, degree: int)
         if best is not None and w > 5 and min(arc[i0] - arc[max(0, i0 - w)], arc[min(len(arc) - 1, i0 + w)] - arc[i0]) \
                 > BIAS_LIMIT / max(best.curvature, 1e-300):
             break
-        fit, se = _fit_polynomial(sub, contact, degree, sigma=sigma, plane=plane)
-        value = np.array([fit.slope, fit.signed_second])
+        fit, value, se = _fit_polynomial(sub, contact, degree, sigma=sigma, plane=plane)
         lo = np.maximum(lo, value - GAMMA * se)
         hi = np.minimum(hi, value + GAMMA * se)
         if best is not None and np.any(lo > hi):
@@ -233,8 +232,8 @@ def _sampling_plane(points: np.ndarray):
 
 def _fit_polynomial(points: np.ndarray, contact: np.ndarray, degree: int, *, sigma: float = 0.0, plane=None):
     """Least-squares polynomial in the sampling plane (``plane``, or fitted to
-    ``points``); the fit and the standard errors ``(2,)`` of its slope and
-    second derivative at ``contact``."""
+    ``points``).  Returns the fit, the slope and second derivative ``(2,)`` at
+    ``contact`` and their standard errors ``(2,)`` for noise ``sigma``."""
     e1, e2, plane_normal = _sampling_plane(points) if plane is None else plane
     rel = points - contact
     x, y = rel @ e1, rel @ e2
@@ -256,9 +255,7 @@ def _fit_polynomial(points: np.ndarray, contact: np.ndarray, degree: int, *, sig
     cov = np.linalg.pinv(A.T @ A)
     se = sigma * np.sqrt(np.array([cov[1, 1] / h**2, 4.0 * cov[2, 2] / h**4]))
     fit = CurveFit(tangent, principal_normal, float(curvature), plane_normal)
-    object.__setattr__(fit, "slope", float(slope))
-    object.__setattr__(fit, "signed_second", float(second))
-    return fit, se
+    return fit, np.array([slope, second]), se
 
 
 def data_normal(tangents: np.ndarray) -> np.ndarray:

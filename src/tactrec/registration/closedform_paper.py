@@ -13,8 +13,9 @@ The superposition error is the mean first-order distance (eq. 11)::
 From every candidate (Section 4.2.1): the initial ``phi`` by scanning
 ``[0, 2 pi)`` and bisecting on ``dE/dphi`` inside each bracket around a
 local minimum; then steepest descent on ``(u, v, phi)`` with the analytic
-gradient of (11) until ``E`` no longer decreases (Section 4.2.2).  The
-registration error is the smallest local minimum (eq. 12).
+gradient of (11), each step a line search along ``-grad E``, until ``E`` no
+longer decreases or 100 steps are done (Section 4.2.2).  The registration
+error is the smallest local minimum (eq. 12).
 
 Everything is batched over candidates.  Steepest descent works in the
 surface's metric (u scaled by ``|sigma_u|``, v by ``|sigma_v|``, phi by the
