@@ -113,3 +113,11 @@ def test_demo_prints_a_correct_recognition_and_writes_a_picture(tmp_path, capsys
     out = capsys.readouterr().out
     assert "(correct)" in out and "ranking:" in out
     assert picture.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_bench_paper_example_runs_and_writes_its_table(tmp_path, capsys):
+    assert main(["bench", "paper-example", "--instances", "2", "--out", str(tmp_path), "--quiet"]) == 0
+    table = json.loads((tmp_path / "paper-example.json").read_text())
+    noise_free = [r for r in table["rows"] if r["noise"] == 0 and r["spacing"] == 0.005][0]
+    assert max(noise_free["max"]) < 1e-3
+    assert "Section 4.3.1" in capsys.readouterr().out

@@ -9,11 +9,12 @@ from __future__ import annotations
 
 from typing import Callable
 
-from . import paper_closedform
+from . import paper_closedform, paper_example
 
 __all__ = ["BENCHMARKS"]
 
 BENCHMARKS: dict[str, Callable[..., dict]] = {
     "paper-table2": paper_closedform.run_table2,
     "paper-table3": paper_closedform.run_table3,
+    "paper-example": paper_example.run,
 }
