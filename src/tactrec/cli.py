@@ -78,7 +78,7 @@ def _warn(line: str) -> None:
 def cmd_build(args) -> int:
     from .database import build_database
 
-    report = build_database(args.models, args.out, quiet=args.quiet)
+    report = build_database(args.models, args.out, quiet=args.quiet, units=args.units, scale=args.scale)
     if not args.quiet:
         removed = f", {len(report.removed)} old file(s) removed" if report.removed else ""
         print(f"{report.path}: {len(report.built)} built, {len(report.reused)} unchanged{removed}")
@@ -104,7 +104,8 @@ def cmd_recognize(args) -> int:
     if (args.db is None) == (not args.models):
         raise InputError("give either --db DB or --models MODEL...", "tactrec recognize")
     touches = [load_touch(path) for path in args.data]          # validate everything first
-    db = open_models(db=args.db, models=args.models, warn=_warn, quiet=args.quiet)
+    db = open_models(db=args.db, models=args.models, warn=_warn, quiet=args.quiet, units=args.units,
+                     scale=args.scale)
     results = [recognize(t, db, method=args.method, **_recognition_options(args)) for t in touches]
     out_lines = []
     for path, result in zip(args.data, results):
@@ -135,7 +136,7 @@ def cmd_simulate(args) -> int:
     from .simulation import simulate_random_touch, simulate_touch
     from .surfaces import load_model
 
-    model = load_model(args.model)
+    model = load_model(args.model, units=args.units, scale=args.scale)
     given = [x for x in (args.at, args.uv, args.vertex) if x is not None]
     if len(given) > 1:
         raise InputError("give at most one of --at, --uv, --vertex", "tactrec simulate")
@@ -193,6 +194,13 @@ def cmd_demo(args) -> int:
 
 
 # ---------------------------------------------------------------------- parser
+def _mesh_options(p) -> None:
+    from .units import UNITS
+
+    p.add_argument("--units", choices=sorted(UNITS), help="units of the mesh files' coordinates")
+    p.add_argument("--scale", type=_positive, help="factor on the mesh files' coordinates (e.g. 1000 for m to mm)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     from .registration import DEFAULT_METHOD, METHODS
 
@@ -209,8 +217,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("build", help="build a model database from model files or built-in names")
     p.add_argument("models", nargs="+", metavar="MODEL",
-                   help="model files (.toml), built-in names, or a built-in set (closed-form, paper-table1, ...)")
+                   help="model files (.toml, .ply, .obj, .stl, .off), built-in names, or a built-in set "
+                   "(closed-form, paper-table1, ...)")
     p.add_argument("--out", required=True, metavar="DB", help="database folder")
+    _mesh_options(p)
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
     p.set_defaults(func=cmd_build)
 
@@ -222,6 +232,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--method", choices=sorted(METHODS), default=DEFAULT_METHOD,
                    help=f"registration method (default {DEFAULT_METHOD})")
     p.add_argument("--delta", type=_positive, help="lookup tolerance on (k1, k2), 1/model units")
+    _mesh_options(p)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_recognize)
 
@@ -242,6 +253,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--contact", action="store_true", help="include the (noise-free) contact point")
     p.add_argument("--model-frame", action="store_true", help="no random rigid motion (data in the model frame)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    _mesh_options(p)
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
     p.set_defaults(func=cmd_simulate)
 

@@ -91,10 +91,15 @@ def _entry(model) -> ModelEntry:
     return ModelEntry(model, CurvatureTable(model.table_samples()))
 
 
-def build_entries(models: Iterable, *, quiet: bool = True) -> Database:
-    """Load models (paths, built-in names or set names) and build their tables in memory."""
+def build_entries(models: Iterable, *, quiet: bool = True, units: str | None = None,
+                  scale: float | None = None) -> Database:
+    """Load models (paths, built-in names or set names) and build their tables in memory.
+
+    ``units`` and ``scale`` apply to mesh files (see :func:`tactrec.surfaces.load_model`).
+    """
     paths = resolve_models(models)
-    entries = [_entry(load_model(p)) for p in _progress(paths, total=len(paths), desc="models", quiet=quiet)]
+    entries = [_entry(load_model(p, units=units, scale=scale))
+               for p in _progress(paths, total=len(paths), desc="models", quiet=quiet)]
     _check_unique([e.name for e in entries], paths)
     return Database(entries)
 
@@ -177,11 +182,13 @@ def load_database(path: str | os.PathLike, *, warn=None) -> Database:
     return Database(entries, db)
 
 
-def build_database(models: Iterable, out: str | os.PathLike, *, quiet: bool = False) -> BuildReport:
+def build_database(models: Iterable, out: str | os.PathLike, *, quiet: bool = False, units: str | None = None,
+                   scale: float | None = None) -> BuildReport:
     """Build (or update) the database ``out`` from model files or built-in names.
 
-    Models whose source file (and table builder) are unchanged are reused;
-    the others are rebuilt.  The database afterwards holds exactly ``models``.
+    Models whose source file, options (``units``, ``scale`` of mesh files)
+    and table builder are unchanged are reused; the others are rebuilt.  The
+    database afterwards holds exactly ``models``.
     """
     out = Path(out)
     paths = resolve_models(models)
@@ -198,12 +205,14 @@ def build_database(models: Iterable, out: str | os.PathLike, *, quiet: bool = Fa
         raise InputError("exists and is not a folder", out)
     items, built, reused = [], [], []
     builtin_root = str(Path(builtin_path("ellipsoid")).parent)
-    models = [load_model(path) for path in paths]  # every model is checked before anything is written
+    models = [load_model(path, units=units, scale=scale) for path in paths]  # all checked before any write
     _check_unique([model.name for model in models], paths)
     for path, model in _progress(zip(paths, models), total=len(paths), desc="building", quiet=quiet):
         sha = file_sha256(path)
+        options = {"units": units, "scale": scale} if model.kind == "mesh" else {}
         prev = old.get(model.name)
         if (prev and prev["source_sha256"] == sha and prev.get("table_version") == TABLE_VERSION
+                and prev.get("options", {}) == options
                 and (out / prev["file"]).is_file()
                 and file_sha256(out / prev["file"]) == prev["file_sha256"]):
             items.append(dict(prev, source=str(path)))
@@ -218,7 +227,7 @@ def build_database(models: Iterable, out: str | os.PathLike, *, quiet: bool = Fa
         with atomic_write(out / name, "wb") as handle:
             handle.write(blob)
         items.append({
-            "name": model.name, "kind": model.kind, "units": model.units, "file": name,
+            "name": model.name, "kind": model.kind, "units": model.units, "options": options, "file": name,
             "source": str(path), "source_sha256": sha, "file_sha256": hashlib.sha256(blob).hexdigest(),
             "table_rows": len(entry.table), "table_version": TABLE_VERSION,
             "builtin": str(path).startswith(builtin_root),
@@ -235,8 +244,8 @@ def build_database(models: Iterable, out: str | os.PathLike, *, quiet: bool = Fa
     return BuildReport(out, built, reused, removed)
 
 
-def open_models(*, db=None, models=None, warn=None, quiet: bool = True) -> Database:
+def open_models(*, db=None, models=None, warn=None, quiet: bool = True, units=None, scale=None) -> Database:
     """A database from ``db`` (a folder) or built on the fly from ``models``."""
     if db is not None:
         return load_database(db, warn=warn)
-    return build_entries(models, quiet=quiet)
+    return build_entries(models, quiet=quiet, units=units, scale=scale)

@@ -13,20 +13,28 @@ from typing import Callable
 from ..errors import InputError
 from .base import SiteFrame, SurfaceModel, TableSamples
 from .closedform import ClosedFormSurface
+from .mesh import MESH_SUFFIXES, MeshModel
 
 __all__ = [
-    "SurfaceModel", "TableSamples", "SiteFrame", "ClosedFormSurface",
+    "SurfaceModel", "TableSamples", "SiteFrame", "ClosedFormSurface", "MeshModel",
     "LOADERS", "KINDS", "BUILTIN_SETS", "load_model", "builtin_names", "builtin_path", "resolve_models",
 ]
 
-#: file suffix -> loader taking a path and returning a SurfaceModel
-LOADERS: dict[str, Callable[[Path], SurfaceModel]] = {
-    ".toml": ClosedFormSurface.from_file,
+def _load_toml(path: Path, **_mesh_options) -> ClosedFormSurface:
+    """A TOML surface declares its own units; mesh options do not apply."""
+    return ClosedFormSurface.from_file(path)
+
+
+#: file suffix -> loader taking a path (and the mesh options ``units``, ``scale``)
+LOADERS: dict[str, Callable[..., SurfaceModel]] = {
+    ".toml": _load_toml,
+    **{suffix: MeshModel.from_file for suffix in MESH_SUFFIXES},
 }
 
 #: model kind -> class with ``from_store(arrays, name=, source=)`` (databases)
 KINDS: dict[str, type] = {
     ClosedFormSurface.kind: ClosedFormSurface,
+    MeshModel.kind: MeshModel,
 }
 
 #: named sets of built-in models
@@ -55,10 +63,12 @@ def builtin_path(name: str) -> Path:
     return path
 
 
-def load_model(spec: str | os.PathLike) -> SurfaceModel:
+def load_model(spec: str | os.PathLike, *, units: str | None = None, scale: float | None = None) -> SurfaceModel:
     """Load a model from a file, or a built-in model by name.
 
-    Raises :class:`InputError` (one line naming the file) on any problem.
+    ``units`` (the file's) and ``scale`` (a factor on its coordinates) apply
+    to mesh files.  Raises :class:`InputError` (one line naming the file) on
+    any problem.
     """
     path = Path(spec)
     if not path.exists() and isinstance(spec, str) and spec in builtin_names():
@@ -68,7 +78,7 @@ def load_model(spec: str | os.PathLike) -> SurfaceModel:
     loader = LOADERS.get(path.suffix.lower())
     if loader is None:
         raise InputError(f"unsupported model format {path.suffix!r}; expected one of {', '.join(LOADERS)}", path)
-    return loader(path)
+    return loader(path, units=units, scale=scale)
 
 
 def resolve_models(specs) -> list[Path]:

@@ -1,0 +1,443 @@
+"""Triangle-mesh models (paper Section 5).
+
+Loaded with trimesh from PLY, OBJ, STL or OFF, and cleaned as a scan needs:
+duplicate vertices merged, degenerate and repeated faces dropped, tiny stray
+components (under 1 % of the faces) dropped, unreferenced vertices removed;
+what was done is kept in :attr:`MeshModel.cleanup`.  Open (non-watertight)
+meshes are fine.
+
+* vertex normals: the normalised sum of the incident face normals (eq. 13);
+* k-ring neighbourhoods from the vertex adjacency (Section 5.1.1);
+* lookup table (Section 5.2): the paper's vertex sampling (theta = pi/8, the
+  6-ring shrinking to 2, until half of the vertices are marked) and principal
+  curvatures by paraboloid fits ``z = a x^2 + b xy + c y^2 + d x + e y + f``
+  to the 30, 40, 50, 60 and 70 vertices of the 6-ring nearest to the sample,
+  taking the median of ``k1`` and of ``k2`` (eq. 14).
+
+A site on a mesh is ``[vertex]``, or ``[face, b1, b2]`` for a point inside
+a face with barycentric coordinates ``(1 - b1 - b2, b1, b2)``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from functools import cached_property
+from pathlib import Path
+
+import numpy as np
+from scipy import sparse
+
+from ..errors import InputError
+from .base import SiteFrame, SurfaceModel, TableSamples
+
+__all__ = ["MeshModel", "MESH_SUFFIXES", "paraboloid_curvatures"]
+
+MESH_SUFFIXES = (".ply", ".obj", ".stl", ".off")
+STRAY_FRACTION = 0.01
+
+
+def _unit_rows(a: np.ndarray) -> np.ndarray:
+    norm = np.linalg.norm(a, axis=-1, keepdims=True)
+    return a / np.where(norm > 0, norm, 1.0)
+
+
+class MeshModel(SurfaceModel):
+    """A triangle mesh (paper Section 5).
+
+    Parameters
+    ----------
+    vertices : (n, 3) float
+    faces : (m, 3) int
+    name, units, source, source_hash : model identity
+    scale : float
+        Factor already applied to the file's coordinates (recorded).
+    cleanup : dict
+        What the loader did to the file's mesh.
+    """
+
+    kind = "mesh"
+
+    def __init__(self, vertices, faces, *, name: str, units: str | None = None, source: str = "<mesh>",
+                 source_hash: str = "", scale: float = 1.0, cleanup: dict | None = None):
+        self.vertices = np.ascontiguousarray(vertices, dtype=np.float64)
+        self.faces = np.ascontiguousarray(faces, dtype=np.int64)
+        self.name = name
+        self.units = units
+        self.source = source
+        self.source_hash = source_hash
+        self.scale = float(scale)
+        self.cleanup = dict(cleanup or {})
+
+    # ------------------------------------------------------------------ loading
+    @classmethod
+    def from_file(cls, path: str | os.PathLike, *, units: str | None = None, scale: float | None = None,
+                  name: str | None = None) -> "MeshModel":
+        """Load and clean a mesh file.  ``units`` are the file's; ``scale``
+        multiplies its coordinates (e.g. 1000 with ``units="m"`` gives mm)."""
+        import trimesh
+
+        from ..units import UNITS, unit_scale
+
+        path = Path(path)
+        if not path.is_file():
+            raise InputError("no such file", path)
+        if units is not None:
+            try:
+                unit_scale(units)
+            except ValueError as exc:
+                raise InputError(str(exc), path) from None
+        if scale is not None and not (np.isfinite(scale) and scale > 0):
+            raise InputError(f"scale must be a positive number, got {scale!r}", path)
+        blob = path.read_bytes()
+        if not blob.strip():
+            raise InputError("empty file", path)
+        try:
+            mesh = trimesh.load(path, force="mesh", process=False)
+        except Exception as exc:  # trimesh raises many kinds on a broken file
+            raise InputError(f"cannot read mesh ({exc.__class__.__name__}: {str(exc)[:120]})", path) from None
+        if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0 or len(mesh.vertices) < 3:
+            raise InputError("no triangles in the file", path)
+        vertices = np.asarray(mesh.vertices, dtype=np.float64)
+        if not np.all(np.isfinite(vertices)):
+            raise InputError("vertex coordinates are not finite", path)
+        vertices, faces, report = clean_mesh(vertices, np.asarray(mesh.faces, dtype=np.int64))
+        if len(faces) == 0:
+            raise InputError("degenerate mesh: no triangle with a non-zero area", path)
+        factor = 1.0 if scale is None else float(scale)
+        out_units = units
+        if scale is not None and units is not None:
+            # name the units the scaled coordinates are in, when it is a known one
+            target = unit_scale(units) / factor
+            out_units = next((u for u, s in UNITS.items() if np.isclose(s, target, rtol=1e-9)), None)
+        return cls(vertices * factor, faces, name=name or path.stem, units=out_units, source=str(path),
+                   source_hash=hashlib.sha256(blob).hexdigest(), scale=factor, cleanup=report)
+
+    # ------------------------------------------------------------------ storage
+    def to_store(self) -> dict[str, np.ndarray]:
+        return {"mesh_vertices": self.vertices, "mesh_faces": self.faces,
+                "mesh_units": np.array(self.units or ""), "mesh_scale": np.array(self.scale)}
+
+    @classmethod
+    def from_store(cls, arrays, *, name: str, source: str) -> "MeshModel":
+        vertices = np.asarray(arrays["mesh_vertices"], dtype=np.float64)
+        faces = np.asarray(arrays["mesh_faces"], dtype=np.int64)
+        if faces.ndim != 2 or faces.shape[1] != 3 or faces.min() < 0 or faces.max() >= len(vertices):
+            raise ValueError("mesh faces do not index its vertices")
+        units = str(arrays["mesh_units"]) or None
+        return cls(vertices, faces, name=name, units=units, source=source, scale=float(arrays["mesh_scale"]))
+
+    # ------------------------------------------------------------------ geometry
+    @cached_property
+    def face_normals(self) -> np.ndarray:
+        v = self.vertices[self.faces]
+        return _unit_rows(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]))
+
+    @cached_property
+    def vertex_normals(self) -> np.ndarray:
+        """Eq. (13): normalised sum of the normals of the faces around each vertex."""
+        acc = np.zeros_like(self.vertices)
+        for k in range(3):
+            np.add.at(acc, self.faces[:, k], self.face_normals)
+        return _unit_rows(acc)
+
+    @cached_property
+    def adjacency(self) -> sparse.csr_matrix:
+        """Vertex adjacency (edges of the mesh), CSR."""
+        f = self.faces
+        i = np.concatenate([f[:, 0], f[:, 1], f[:, 2], f[:, 1], f[:, 2], f[:, 0]])
+        j = np.concatenate([f[:, 1], f[:, 2], f[:, 0], f[:, 0], f[:, 1], f[:, 2]])
+        n = len(self.vertices)
+        a = sparse.csr_matrix((np.ones(len(i), dtype=np.int8), (i, j)), shape=(n, n))
+        a.data[:] = 1
+        return a
+
+    @cached_property
+    def vertex_faces(self) -> sparse.csr_matrix:
+        """Vertex-to-face incidence, CSR ``(n_vertices, n_faces)``."""
+        m = len(self.faces)
+        rows = self.faces.ravel()
+        cols = np.repeat(np.arange(m), 3)
+        return sparse.csr_matrix((np.ones(3 * m, dtype=np.int8), (rows, cols)), shape=(len(self.vertices), m))
+
+    def rings(self, vertex: int, k: int) -> list[np.ndarray]:
+        """Vertices at exactly 0, 1, ..., k edges from ``vertex`` (breadth first)."""
+        indptr, indices = self.adjacency.indptr, self.adjacency.indices
+        seen = {int(vertex)}
+        levels = [np.array([vertex])]
+        frontier = [int(vertex)]
+        for _ in range(k):
+            nxt = []
+            for v in frontier:
+                for w in indices[indptr[v]:indptr[v + 1]]:
+                    w = int(w)
+                    if w not in seen:
+                        seen.add(w)
+                        nxt.append(w)
+            levels.append(np.array(nxt, dtype=np.int64))
+            frontier = nxt
+            if not nxt:
+                break
+        return levels
+
+    def ring(self, vertex: int, k: int) -> np.ndarray:
+        """The k-ring neighbourhood: all vertices at most ``k`` edges from ``vertex``."""
+        return np.concatenate(self.rings(vertex, k))
+
+    @cached_property
+    def size(self) -> float:
+        return float(np.linalg.norm(np.ptp(self.vertices, axis=0)))
+
+    @cached_property
+    def mean_edge(self) -> float:
+        f = self.faces
+        e = self.vertices[f] - self.vertices[np.roll(f, 1, axis=1)]
+        return float(np.mean(np.linalg.norm(e, axis=-1)))
+
+    # ------------------------------------------------------------------ table
+    def sample_vertices(self, *, theta: float = np.pi / 8, max_ring: int = 6, min_ring: int = 2,
+                        rng=None) -> np.ndarray:
+        """The paper's vertex sampling (Section 5.2.1), seeded.
+
+        Repeat: pick a random unmarked vertex ``v``; take its 6-ring; while some
+        face of the ring turns more than ``theta`` from ``v``'s normal and the
+        ring is larger than 2, shrink it by one; if no vertex of the ring is
+        marked, mark them all and keep ``v``.  Until half of the vertices are
+        marked (or every vertex has been tried once).
+        """
+        rng = np.random.default_rng(rng)
+        n = len(self.vertices)
+        marked = np.zeros(n, dtype=bool)
+        count = 0
+        samples = []
+        cos_theta = np.cos(theta)
+        vf = self.vertex_faces
+        normals = self.vertex_normals
+        fn = self.face_normals
+        for v in rng.permutation(n):
+            if count >= n / 2:
+                break
+            if marked[v]:
+                continue
+            levels = self.rings(int(v), max_ring)
+            ring = len(levels) - 1
+            while True:
+                members = np.concatenate(levels[: ring + 1])
+                faces = np.unique(vf[members].indices)
+                if ring <= min_ring or np.min(fn[faces] @ normals[v]) >= cos_theta:
+                    break
+                ring -= 1
+            if not marked[members].any():
+                marked[members] = True
+                count += len(members)
+                samples.append(int(v))
+        return np.array(samples, dtype=np.int64)
+
+    def vertex_curvatures(self, vertices, *, sizes=(30, 40, 50, 60, 70), ring: int = 6):
+        """Principal curvatures at ``vertices`` by paraboloid fits (Section 5.2.2).
+
+        Returns ``k1, k2`` (``k1 >= k2``), the medians over the fits to the
+        ``sizes`` nearest vertices of each vertex's ``ring``-ring.
+        """
+        vertices = np.atleast_1d(np.asarray(vertices, dtype=np.int64))
+        k1 = np.empty(len(vertices))
+        k2 = np.empty(len(vertices))
+        for i, v in enumerate(vertices):
+            neigh = self.ring(int(v), ring)
+            k1[i], k2[i] = paraboloid_curvatures(self.vertices[v], self.vertex_normals[v], self.vertices[neigh],
+                                                 sizes=sizes)
+        return k1, k2
+
+    def table_samples(self, *, resolution=None, rng=0) -> TableSamples:
+        """The paper's mesh table: sampled vertices with fitted curvatures."""
+        sample = self.sample_vertices(rng=rng)
+        k1, k2 = self.vertex_curvatures(sample)
+        keep = np.isfinite(k1) & np.isfinite(k2)
+        sample = sample[keep]
+        return TableSamples(sample[:, None].astype(np.float64), self.vertices[sample], self.vertex_normals[sample],
+                            k1[keep], k2[keep])
+
+    # ------------------------------------------------------------------ distance, sites
+    def distance(self, points: np.ndarray) -> np.ndarray:
+        """Exact distance of ``points`` (..., 3) to the mesh (trimesh)."""
+        import trimesh
+
+        points = np.asarray(points, dtype=np.float64)
+        flat = points.reshape(-1, 3)
+        _, dist, _ = trimesh.proximity.closest_point(self._trimesh, flat)
+        return dist.reshape(points.shape[:-1])
+
+    @cached_property
+    def _trimesh(self):
+        import trimesh
+
+        return trimesh.Trimesh(self.vertices, self.faces, process=False)
+
+    def site_frame(self, site) -> SiteFrame:
+        site = np.atleast_1d(np.asarray(site, dtype=np.float64))
+        if len(site) == 1:
+            v = int(site[0])
+            if not 0 <= v < len(self.vertices):
+                raise ValueError(f"vertex {v} is not in the mesh (0..{len(self.vertices) - 1})")
+            point, normal = self.vertices[v], self.vertex_normals[v]
+        elif len(site) == 3:
+            f = int(site[0])
+            b = np.array([1.0 - site[1] - site[2], site[1], site[2]])
+            corners = self.faces[f]
+            point = b @ self.vertices[corners]
+            normal = _unit_rows(b @ self.vertex_normals[corners])
+        else:
+            raise ValueError("a mesh site is [vertex] or [face, b1, b2]")
+        helper = np.eye(3)[int(np.argmin(np.abs(normal)))]
+        d1 = _unit_rows(helper - (helper @ normal) * normal)
+        return SiteFrame(site, point, d1, np.cross(normal, d1), normal)
+
+    def locate(self, point) -> np.ndarray:
+        """``[face, b1, b2]`` of the surface point nearest to ``point``."""
+        import trimesh
+
+        closest, _, face = trimesh.proximity.closest_point(self._trimesh, np.asarray(point, dtype=float)[None])
+        tri = self.vertices[self.faces[int(face[0])]]
+        bary = trimesh.triangles.points_to_barycentric(tri[None], closest)[0]
+        return np.array([float(face[0]), bary[1], bary[2]])
+
+    def random_sites(self, count: int, *, rng=None) -> np.ndarray:
+        """Random vertices (the paper's P3 places touches on vertices)."""
+        rng = np.random.default_rng(rng)
+        return rng.choice(len(self.vertices), size=count, replace=count > len(self.vertices))[:, None].astype(float)
+
+    def plane_section(self, site, tangent, *, spacing: float, count: int) -> np.ndarray:
+        """Points of the mesh's section by the plane through the site spanned by
+        its normal and ``tangent``, at equal arc length, centred on the site."""
+        frame = self.site_frame(site)
+        p, n = frame.point, frame.normal
+        t = _unit_rows(np.asarray(tangent, dtype=float) - (np.asarray(tangent, dtype=float) @ n) * n)
+        m = np.cross(n, t)
+        section = self._trimesh.section(plane_origin=p, plane_normal=m)
+        if section is None:
+            raise ValueError("the plane does not cut the mesh")
+        best, best_d = None, np.inf
+        for entity in section.entities:          # open polylines too (``discrete`` holds closed loops only)
+            line = np.asarray(entity.discrete(section.vertices), dtype=float)
+            if len(line) < 2:
+                continue
+            d = np.min(np.linalg.norm(line - p, axis=1))
+            if d < best_d:
+                best, best_d = line, d
+        if best is None or best_d > 1e-6 * max(self.size, 1e-300) + 1e-9:
+            raise ValueError("the plane section does not pass through the site")
+        seg = np.linalg.norm(np.diff(best, axis=0), axis=1)
+        arc = np.concatenate([[0.0], np.cumsum(seg)])
+        closed = np.allclose(best[0], best[-1])
+        # arc position of p: project on the nearest segment
+        a, b = best[:-1], best[1:]
+        ab = b - a
+        tt = np.clip(np.sum((p - a) * ab, axis=1) / np.maximum(np.sum(ab * ab, axis=1), 1e-300), 0, 1)
+        dist = np.linalg.norm(a + tt[:, None] * ab - p, axis=1)
+        k = int(np.argmin(dist))
+        s0 = arc[k] + tt[k] * seg[k]
+        # orient along the tangent
+        direction = 1.0 if (ab[k] @ t) >= 0 else -1.0
+        targets = s0 + direction * (np.arange(count) - (count - 1) / 2.0) * spacing
+        total = arc[-1]
+        if closed:
+            targets = np.mod(targets, total)
+        elif targets.min() < -1e-9 or targets.max() > total + 1e-9:
+            raise ValueError("a section curve runs off the edge of the mesh")
+        return np.stack([np.interp(targets, arc, best[:, i]) for i in range(3)], axis=1)
+
+
+def clean_mesh(vertices: np.ndarray, faces: np.ndarray):
+    """Merge duplicate vertices, drop degenerate, repeated and out-of-range
+    faces and stray components (under 1 % of the faces), remove unreferenced
+    vertices.  Returns ``vertices, faces, report``."""
+    report = {"vertices_in": int(len(vertices)), "faces_in": int(len(faces))}
+    bad = (faces < 0) | (faces >= len(vertices))
+    if bad.any():
+        faces = faces[~bad.any(axis=1)]
+        report["faces_out_of_range"] = int(bad.any(axis=1).sum())
+    scale = float(np.ptp(vertices, axis=0).max()) or 1.0
+    key = np.round(vertices / (scale * 1e-9)).astype(np.int64)
+    _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    inverse = inverse.ravel()
+    report["duplicate_vertices_merged"] = int(len(vertices) - len(first))
+    vertices = vertices[first]
+    faces = inverse[faces]
+    tri = vertices[faces]
+    area2 = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    degenerate = (faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2]) | (faces[:, 0] == faces[:, 2]) \
+        | (area2 <= 1e-12 * scale * scale)
+    report["degenerate_faces_dropped"] = int(degenerate.sum())
+    faces = faces[~degenerate]
+    _, unique = np.unique(np.sort(faces, axis=1), axis=0, return_index=True)
+    report["repeated_faces_dropped"] = int(len(faces) - len(unique))
+    faces = faces[np.sort(unique)]
+    if len(faces):
+        # components by shared vertices
+        n = len(vertices)
+        m = len(faces)
+        inc = sparse.csr_matrix((np.ones(3 * m), (np.repeat(np.arange(m), 3), faces.ravel())), shape=(m, n))
+        graph = sparse.bmat([[None, inc], [inc.T, None]]).tocsr()
+        ncomp, labels = sparse.csgraph.connected_components(graph, directed=False)
+        face_labels = labels[:m]
+        counts = np.bincount(face_labels, minlength=ncomp)
+        keep_comp = counts >= max(1, STRAY_FRACTION * m)
+        keep = keep_comp[face_labels]
+        report["stray_components_dropped"] = int(np.sum((counts > 0) & ~keep_comp))
+        report["stray_faces_dropped"] = int((~keep).sum())
+        faces = faces[keep]
+    used = np.zeros(len(vertices), dtype=bool)
+    used[faces.ravel()] = True
+    remap = np.cumsum(used) - 1
+    report["unreferenced_vertices_removed"] = int((~used).sum())
+    vertices = vertices[used]
+    faces = remap[faces]
+    report["vertices"] = int(len(vertices))
+    report["faces"] = int(len(faces))
+    return vertices, faces, report
+
+
+def paraboloid_curvatures(center: np.ndarray, normal: np.ndarray, neighbours: np.ndarray, *,
+                          sizes=(30, 40, 50, 60, 70)) -> tuple[float, float]:
+    """Median principal curvatures of paraboloid fits (eq. 14) at ``center``.
+
+    ``neighbours`` (m, 3) are expressed in the frame (t1, t2, n) at ``center``
+    and sorted by distance; ``z = a x^2 + b xy + c y^2 + d x + e y + f`` is
+    fitted to the nearest ``s`` of them for each ``s`` in ``sizes`` (fewer if
+    the ring is smaller, at least 6); the principal curvatures of each fit at
+    the origin (Monge patch, ``k = c'' . n``) are reduced by medians, ``k1``
+    and ``k2`` separately.
+    """
+    n = normal / np.linalg.norm(normal)
+    helper = np.eye(3)[int(np.argmin(np.abs(n)))]
+    t1 = helper - (helper @ n) * n
+    t1 /= np.linalg.norm(t1)
+    t2 = np.cross(n, t1)
+    rel = neighbours - center
+    order = np.argsort(np.linalg.norm(rel, axis=1))
+    local = rel[order] @ np.stack([t1, t2, n]).T
+    results = []
+    for s in sorted(set(min(s, len(local)) for s in sizes)):
+        if s < 6:
+            continue
+        x, y, z = local[:s, 0], local[:s, 1], local[:s, 2]
+        scale = float(np.max(np.hypot(x, y))) or 1.0
+        X, Y = x / scale, y / scale
+        A = np.stack([X * X, X * Y, Y * Y, X, Y, np.ones_like(X)], axis=1)
+        coef, _, rank, _ = np.linalg.lstsq(A, z, rcond=None)
+        if rank < 6:
+            continue
+        a, b, c = coef[0] / scale**2, coef[1] / scale**2, coef[2] / scale**2
+        d, e = coef[3] / scale, coef[4] / scale
+        w = np.sqrt(1 + d * d + e * e)
+        E, F, G = 1 + d * d, d * e, 1 + e * e
+        L, M, N = 2 * a / w, b / w, 2 * c / w
+        det = E * G - F * F
+        H = (E * N - 2 * F * M + G * L) / (2 * det)
+        K = (L * N - M * M) / det
+        root = np.sqrt(max(H * H - K, 0.0))
+        results.append((H + root, H - root))
+    if not results:
+        return float("nan"), float("nan")
+    arr = np.array(results)
+    return float(np.median(arr[:, 0])), float(np.median(arr[:, 1]))

@@ -1,0 +1,140 @@
+"""Triangle-mesh models (paper Section 5): clean-up, units, curvature tables, sections."""
+
+import json
+
+import numpy as np
+import pytest
+import trimesh
+
+from tactrec.cli import main
+from tactrec.database import load_database
+from tactrec.errors import InputError
+from tactrec.surfaces import load_model
+from tactrec.surfaces.mesh import MeshModel, clean_mesh
+
+
+def _model(tm, name="m"):
+    v, f, _ = clean_mesh(np.asarray(tm.vertices, dtype=float), np.asarray(tm.faces))
+    return MeshModel(v, f, name=name)
+
+
+def grid_cylinder(r=15.0, h=60.0, nu=192, nv=80):
+    """An open cylinder (no caps) triangulated on a parameter grid."""
+    u = np.linspace(0, 2 * np.pi, nu, endpoint=False)
+    z = np.linspace(-h / 2, h / 2, nv)
+    U, Z = np.meshgrid(u, z, indexing="ij")
+    V = np.stack([r * np.cos(U), r * np.sin(U), Z], -1).reshape(-1, 3)
+    idx = np.arange(nu * nv).reshape(nu, nv)
+    a, b = idx[:, :-1], np.roll(idx, -1, axis=0)[:, :-1]
+    c, d = np.roll(idx, -1, axis=0)[:, 1:], idx[:, 1:]
+    F = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)])
+    return trimesh.Trimesh(V, F, process=False)
+
+
+def test_table_curvatures_within_5_percent_on_a_sphere():
+    m = _model(trimesh.creation.icosphere(subdivisions=5, radius=20.0))
+    tab = m.table_samples(rng=0)
+    assert len(tab) > 20
+    assert np.allclose(tab.k1, -1 / 20, rtol=0.05) and np.allclose(tab.k2, -1 / 20, rtol=0.05)
+    assert np.all(np.sum(tab.normals * tab.positions, axis=1) > 0)          # eq. 13 normals point out
+
+
+def test_table_curvatures_within_5_percent_on_an_open_cylinder():
+    m = _model(grid_cylinder())
+    tab = m.table_samples(rng=0)
+    assert len(tab) > 20
+    assert np.all(np.abs(tab.k1) < 0.05 / 15) and np.allclose(tab.k2, -1 / 15, rtol=0.05)
+
+
+def test_table_curvatures_within_5_percent_on_a_torus():
+    R, r = 30.0, 10.0
+    m = _model(trimesh.creation.torus(major_radius=R, minor_radius=r, major_sections=256, minor_sections=96))
+    tab = m.table_samples(rng=0)
+    rho = np.hypot(tab.positions[:, 0], tab.positions[:, 1])
+    k_around = -((rho - R) / r) / rho
+    true = np.sort(np.stack([k_around, np.full(len(rho), -1 / r)], 1), axis=1)[:, ::-1]
+    scale = np.max(np.abs(true), axis=1)
+    assert np.all(np.abs(tab.k1 - true[:, 0]) <= 0.05 * scale) and np.all(np.abs(tab.k2 - true[:, 1]) <= 0.05 * scale)
+    assert np.any(tab.k1 > 0)                                            # the saddle-shaped inner side is seen
+
+
+def test_vertex_sampling_follows_the_paper_and_is_seeded():
+    m = _model(trimesh.creation.icosphere(subdivisions=4, radius=20.0))
+    a, b = m.sample_vertices(rng=1), m.sample_vertices(rng=1)
+    assert np.array_equal(a, b) and not np.array_equal(a, m.sample_vertices(rng=2))
+    # the marked neighbourhoods of different samples do not overlap: samples are > 2 rings apart
+    for v in a[:20]:
+        assert not set(m.ring(int(v), 2)) & (set(a.tolist()) - {int(v)})
+
+
+def test_messy_scan_is_cleaned_and_reported(tmp_path):
+    sphere = trimesh.creation.icosphere(subdivisions=4, radius=0.03)
+    stray = trimesh.Trimesh([[1, 1, 1], [1.001, 1, 1], [1, 1.001, 1]], [[0, 1, 2]])
+    mesh = trimesh.util.concatenate([sphere, stray])
+    faces = np.vstack([mesh.faces, [[0, 0, 1]]])                         # a degenerate face
+    path = tmp_path / "scan.stl"                                        # STL repeats every vertex per face
+    trimesh.Trimesh(mesh.vertices, faces, process=False).export(path)
+    m = MeshModel.from_file(path, units="m", scale=1000.0)
+    rep = m.cleanup
+    assert rep["duplicate_vertices_merged"] > 0 and rep["stray_components_dropped"] == 1
+    assert rep["degenerate_faces_dropped"] >= 1
+    assert len(m.vertices) == len(sphere.vertices) and len(m.faces) == len(sphere.faces)
+    assert m.units == "mm" and np.isclose(np.linalg.norm(m.vertices, axis=1).max(), 30.0, rtol=1e-6)
+    k1, k2 = m.vertex_curvatures([0, 100])
+    assert np.allclose([k1, k2], -1 / 30.0, rtol=0.05)                  # per millimetre
+
+
+def test_open_mesh_file_loads_and_sections(tmp_path):
+    path = tmp_path / "tube.off"
+    grid_cylinder().export(path)
+    m = load_model(path)
+    assert m.kind == "mesh" and m.name == "tube" and not m._trimesh.is_watertight
+    site = np.array([float(np.argmin(np.abs(m.vertices[:, 2])))])
+    frame = m.site_frame(site)
+    curve = m.plane_section(site, frame.d1, spacing=0.5, count=21)
+    assert np.allclose(curve[10], frame.point)
+    assert np.allclose(np.linalg.norm(np.diff(curve, axis=0), axis=1), 0.5, rtol=0.02)
+    assert np.max(np.abs(np.hypot(curve[:, 0], curve[:, 1]) - 15.0)) < 0.01
+    with pytest.raises(ValueError, match="edge of the mesh"):
+        m.plane_section(site, [0, 0, 1], spacing=2.0, count=41)         # 80 mm along a 60 mm tube
+
+
+@pytest.mark.parametrize("content, message", [
+    (b"", "empty file"),
+    (b"ply\nformat ascii 1.0\nelement vertex 3\n", "cannot read mesh"),
+    (b"v 0 0 0\nv 1 0 0\nv 0 1 0\n", "no triangles"),
+    (b"v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n", "degenerate mesh"),
+])
+def test_broken_mesh_files_give_one_line(tmp_path, capsys, content, message):
+    suffix = ".ply" if content.startswith(b"ply") else ".obj"
+    path = tmp_path / f"broken{suffix}"
+    path.write_bytes(content)
+    assert main(["build", str(path), "--out", str(tmp_path / "db")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and str(path) in err[0] and message in err[0]
+    assert not (tmp_path / "db" / "index.json").exists()
+
+
+def test_mesh_database_records_units_and_rebuilds_on_new_options(tmp_path, capsys):
+    path = tmp_path / "ball.ply"
+    trimesh.creation.icosphere(subdivisions=3, radius=0.02).export(path)
+    db = tmp_path / "db"
+    assert main(["build", str(path), "sphere-33", "--out", str(db), "--units", "m", "--scale", "1000"]) == 0
+    index = json.loads((db / "index.json").read_text())
+    entry = next(m for m in index["models"] if m["name"] == "ball")
+    assert entry["kind"] == "mesh" and entry["units"] == "mm" and entry["options"] == {"units": "m", "scale": 1000.0}
+    loaded = load_database(db).get("ball")
+    assert loaded.model.units == "mm" and np.isclose(np.linalg.norm(loaded.model.vertices, axis=1).max(), 20.0)
+    assert len(loaded.table) > 0 and np.allclose(loaded.table.samples.k2, -1 / 20, rtol=0.1)
+    capsys.readouterr()
+    assert main(["build", str(path), "sphere-33", "--out", str(db), "--units", "m", "--scale", "1000"]) == 0
+    assert "0 built, 2 unchanged" in capsys.readouterr().out
+    assert main(["build", str(path), "sphere-33", "--out", str(db), "--units", "m"]) == 0
+    assert "1 built, 1 unchanged" in capsys.readouterr().out
+
+
+def test_unknown_units_for_a_mesh(tmp_path):
+    path = tmp_path / "ball.stl"
+    trimesh.creation.icosphere(subdivisions=2).export(path)
+    with pytest.raises(InputError, match="unknown units"):
+        MeshModel.from_file(path, units="furlong")
