@@ -138,3 +138,45 @@ def test_unknown_units_for_a_mesh(tmp_path):
     trimesh.creation.icosphere(subdivisions=2).export(path)
     with pytest.raises(InputError, match="unknown units"):
         MeshModel.from_file(path, units="furlong")
+
+
+def test_exact_distance_and_locate_on_a_mesh():
+    m = _model(trimesh.creation.icosphere(subdivisions=4, radius=20.0))
+    pts = np.array([[0.0, 0.0, 30.0], [5.0, -3.0, 1.0]])
+    d = m.distance(pts)
+    assert np.allclose(d, np.abs(np.linalg.norm(pts, axis=1) - 20.0), atol=0.05)
+    site = m.locate([0.0, 0.0, 30.0])
+    frame = m.site_frame(site)
+    assert len(site) == 3 and np.allclose(frame.point / 20.0, [0, 0, 1], atol=0.01)
+
+
+def test_ycb_scans_are_built_in_and_read_in_millimetres():
+    from tactrec.surfaces import BUILTIN_SETS, builtin_names
+
+    names = set(builtin_names())
+    assert set(BUILTIN_SETS["paper-fig11"]) <= names and len([n for n in names if "-" not in n or n.startswith("cups")]) > 60
+    banana = load_model("banana")
+    assert banana.kind == "mesh" and banana.units == "mm" and 150 < banana.size < 300
+
+
+def test_recognising_against_a_mesh_without_a_mesh_method_is_one_line(tmp_path, capsys):
+    touch = tmp_path / "t.json"
+    assert main(["simulate", "banana", "--out", str(touch), "--vertex", "100", "--spacing", "0.3", "--points", "41",
+                 "--quiet"]) == 0
+    assert main(["recognize", str(touch), "--models", "banana"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "mesh" in err[0]
+
+
+def test_touch_anywhere_on_a_face_of_a_scan(tmp_path):
+    """Sections through a point inside a face (not a vertex), P3's length and spacing."""
+    from tactrec.simulation import simulate_touch
+
+    mug = load_model("mug")
+    site = mug.locate([0.0, 0.0, 0.0])
+    touch = simulate_touch(mug, site, points=81, spacing=0.3, noise=0.0, sensor_frame=False, rng=0)
+    truth = touch.meta["truth"]
+    for c in touch.curves:
+        assert np.allclose(c[40], truth["contact"])
+        assert np.max(mug.distance(c)) < 1e-6
+        assert np.allclose(np.linalg.norm(np.diff(c, axis=0), axis=1), 0.3, atol=0.02)

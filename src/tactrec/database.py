@@ -28,7 +28,7 @@ import numpy as np
 from .errors import InputError
 from .io.atomic import atomic_write, write_text_atomic
 from .recognition import ModelEntry
-from .surfaces import KINDS, builtin_path, load_model, resolve_models
+from .surfaces import KINDS, load_model, resolve_models
 from .tables import CurvatureTable
 
 __all__ = ["Database", "BuildReport", "build_database", "load_database", "build_entries", "file_sha256",
@@ -97,10 +97,10 @@ def build_entries(models: Iterable, *, quiet: bool = True, units: str | None = N
 
     ``units`` and ``scale`` apply to mesh files (see :func:`tactrec.surfaces.load_model`).
     """
-    paths = resolve_models(models)
-    entries = [_entry(load_model(p, units=units, scale=scale))
-               for p in _progress(paths, total=len(paths), desc="models", quiet=quiet)]
-    _check_unique([e.name for e in entries], paths)
+    sources = resolve_models(models)
+    entries = [_entry(load_model(src, units=units, scale=scale))
+               for src in _progress(sources, total=len(sources), desc="models", quiet=quiet)]
+    _check_unique([e.name for e in entries], [src.path for src in sources])
     return Database(entries)
 
 
@@ -191,8 +191,8 @@ def build_database(models: Iterable, out: str | os.PathLike, *, quiet: bool = Fa
     database afterwards holds exactly ``models``.
     """
     out = Path(out)
-    paths = resolve_models(models)
-    if not paths:
+    sources = resolve_models(models)
+    if not sources:
         raise InputError("no models given", out)
     old: dict[str, dict] = {}
     if (out / "index.json").exists():
@@ -204,12 +204,13 @@ def build_database(models: Iterable, out: str | os.PathLike, *, quiet: bool = Fa
     elif out.exists() and not out.is_dir():
         raise InputError("exists and is not a folder", out)
     items, built, reused = [], [], []
-    builtin_root = str(Path(builtin_path("ellipsoid")).parent)
-    models = [load_model(path, units=units, scale=scale) for path in paths]  # all checked before any write
-    _check_unique([model.name for model in models], paths)
-    for path, model in _progress(zip(paths, models), total=len(paths), desc="building", quiet=quiet):
+    models = [load_model(src, units=units, scale=scale) for src in sources]  # all checked before any write
+    _check_unique([model.name for model in models], [src.path for src in sources])
+    for src, model in _progress(zip(sources, models), total=len(sources), desc="building", quiet=quiet):
+        path = src.path
         sha = file_sha256(path)
-        options = {"units": units, "scale": scale} if model.kind == "mesh" else {}
+        options = {"units": units if units is not None else src.units,
+                   "scale": scale if scale is not None else src.scale} if model.kind == "mesh" else {}
         prev = old.get(model.name)
         if (prev and prev["source_sha256"] == sha and prev.get("table_version") == TABLE_VERSION
                 and prev.get("options", {}) == options
@@ -230,7 +231,7 @@ def build_database(models: Iterable, out: str | os.PathLike, *, quiet: bool = Fa
             "name": model.name, "kind": model.kind, "units": model.units, "options": options, "file": name,
             "source": str(path), "source_sha256": sha, "file_sha256": hashlib.sha256(blob).hexdigest(),
             "table_rows": len(entry.table), "table_version": TABLE_VERSION,
-            "builtin": str(path).startswith(builtin_root),
+            "builtin": src.builtin,
         })
         built.append(model.name)
     index = {"format": FORMAT, "version": VERSION, "models": items}

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from typing import Callable
 
+from ..errors import InputError
 from . import closedform_paper
 from .result import Registration, local_frame
 
@@ -29,10 +30,11 @@ DEFAULT_METHOD = "paper"
 def get_registrar(method: str, kind: str) -> Callable[..., Registration]:
     """The registration function of ``method`` for models of ``kind``."""
     if method not in METHODS:
-        raise ValueError(f"unknown method {method!r}; available: {', '.join(METHODS)}")
+        raise InputError(f"unknown method {method!r}; available: {', '.join(METHODS)}", "--method")
     by_kind = METHODS[method]
     if kind not in by_kind:
-        raise ValueError(f"method {method!r} does not handle {kind} models")
+        raise InputError(f"method {method!r} cannot register onto {kind} models yet "
+                         f"(it handles: {', '.join(by_kind)})", "--method")
     return by_kind[kind]
 
 

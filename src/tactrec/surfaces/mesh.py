@@ -258,14 +258,25 @@ class MeshModel(SurfaceModel):
                             k1[keep], k2[keep])
 
     # ------------------------------------------------------------------ distance, sites
-    def distance(self, points: np.ndarray) -> np.ndarray:
-        """Exact distance of ``points`` (..., 3) to the mesh (trimesh)."""
-        import trimesh
+    @cached_property
+    def _aabb(self):
+        """libigl's AABB tree over the faces, for exact closest points."""
+        import igl
 
+        tree = igl.AABB()
+        tree.init(self.vertices, self.faces)
+        return tree
+
+    def closest_points(self, points: np.ndarray):
+        """Exact closest points on the mesh: ``(distance, face, point)`` for ``points (m, 3)``."""
+        points = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 3))
+        sq, face, closest = self._aabb.squared_distance(self.vertices, self.faces, points)
+        return np.sqrt(np.maximum(sq, 0.0)), np.asarray(face, dtype=np.int64), np.asarray(closest)
+
+    def distance(self, points: np.ndarray) -> np.ndarray:
+        """Exact distance of ``points`` (..., 3) to the mesh."""
         points = np.asarray(points, dtype=np.float64)
-        flat = points.reshape(-1, 3)
-        _, dist, _ = trimesh.proximity.closest_point(self._trimesh, flat)
-        return dist.reshape(points.shape[:-1])
+        return self.closest_points(points)[0].reshape(points.shape[:-1])
 
     @cached_property
     def _trimesh(self):
@@ -296,7 +307,7 @@ class MeshModel(SurfaceModel):
         """``[face, b1, b2]`` of the surface point nearest to ``point``."""
         import trimesh
 
-        closest, _, face = trimesh.proximity.closest_point(self._trimesh, np.asarray(point, dtype=float)[None])
+        _, face, closest = self.closest_points(np.asarray(point, dtype=float)[None])
         tri = self.vertices[self.faces[int(face[0])]]
         bary = trimesh.triangles.points_to_barycentric(tri[None], closest)[0]
         return np.array([float(face[0]), bary[1], bary[2]])
@@ -321,7 +332,7 @@ class MeshModel(SurfaceModel):
             line = np.asarray(entity.discrete(section.vertices), dtype=float)
             if len(line) < 2:
                 continue
-            d = np.min(np.linalg.norm(line - p, axis=1))
+            d = _segment_distance(line, p)
             if d < best_d:
                 best, best_d = line, d
         if best is None or best_d > 1e-6 * max(self.size, 1e-300) + 1e-9:
@@ -345,6 +356,14 @@ class MeshModel(SurfaceModel):
         elif targets.min() < -1e-9 or targets.max() > total + 1e-9:
             raise ValueError("a section curve runs off the edge of the mesh")
         return np.stack([np.interp(targets, arc, best[:, i]) for i in range(3)], axis=1)
+
+
+def _segment_distance(line: np.ndarray, p: np.ndarray) -> float:
+    """Distance from ``p`` to the polyline ``line``."""
+    a, b = line[:-1], line[1:]
+    ab = b - a
+    t = np.clip(np.sum((p - a) * ab, axis=1) / np.maximum(np.sum(ab * ab, axis=1), 1e-300), 0.0, 1.0)
+    return float(np.min(np.linalg.norm(a + t[:, None] * ab - p, axis=1)))
 
 
 def clean_mesh(vertices: np.ndarray, faces: np.ndarray):
