@@ -159,13 +159,14 @@ def test_ycb_scans_are_built_in_and_read_in_millimetres():
     assert banana.kind == "mesh" and banana.units == "mm" and 150 < banana.size < 300
 
 
-def test_recognising_against_a_mesh_without_a_mesh_method_is_one_line(tmp_path, capsys):
-    touch = tmp_path / "t.json"
-    assert main(["simulate", "banana", "--out", str(touch), "--vertex", "100", "--spacing", "0.3", "--points", "41",
-                 "--quiet"]) == 0
-    assert main(["recognize", str(touch), "--models", "banana"]) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "mesh" in err[0]
+def test_a_method_without_registration_for_a_kind_is_a_clear_error():
+    from tactrec.registration import get_registrar
+
+    assert get_registrar("paper", "mesh") is not None
+    with pytest.raises(InputError, match="cannot register onto volume models"):
+        get_registrar("paper", "volume")
+    with pytest.raises(InputError, match="unknown method"):
+        get_registrar("nonesuch", "mesh")
 
 
 def test_touch_anywhere_on_a_face_of_a_scan(tmp_path):
@@ -180,3 +181,32 @@ def test_touch_anywhere_on_a_face_of_a_scan(tmp_path):
         assert np.allclose(c[40], truth["contact"])
         assert np.max(mug.distance(c)) < 1e-6
         assert np.allclose(np.linalg.norm(np.diff(c, axis=0), axis=1), 0.3, atol=0.02)
+
+
+@pytest.mark.slow
+def test_paper_mesh_registration_walks_to_the_touched_vertex():
+    """Section 5.3: E(v) (eq. 15) is ~0 at the true vertex and the greedy 1-ring walk reaches it."""
+    from tactrec.estimation import estimate
+    from tactrec.registration import mesh_paper
+    from tactrec.simulation import simulate_touch
+
+    m = load_model("banana")
+    v = 1580
+    touch = simulate_touch(m, [v], points=41, spacing=0.3, angle=60.0, rng=0)
+    geom = estimate(touch)
+    problem = mesh_paper.MeshSuperposition(m, geom, touch.curves, phi_step=10.0)
+    e_true, _ = problem.error(v)
+    assert e_true < 0.05                                   # mm; the phi grid is 10 degrees
+    start = int(m.rings(v, 3)[3][0])
+    end, e, phi = problem.walk(start, max_steps=50)
+    assert e <= e_true + 1e-9 and np.linalg.norm(m.vertices[end] - m.vertices[v]) < 2 * m.mean_edge
+    # the whole registration from a one-row table at the start vertex: pose maps the data onto the mesh
+    from tactrec.surfaces.base import TableSamples
+    from tactrec.tables import CurvatureTable
+
+    row = TableSamples(np.array([[float(start)]]), m.vertices[[start]], m.vertex_normals[[start]],
+                       np.array([geom.k1]), np.array([geom.k2]))
+    reg = mesh_paper.register(m, CurvatureTable(row), geom, touch.points, curves=touch.curves)
+    assert reg.ok and reg.candidates == 1 and np.isclose(reg.error, e)
+    mapped = touch.points @ reg.rotation.T + reg.translation
+    assert np.mean(m.distance(mapped)) < 0.05

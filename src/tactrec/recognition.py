@@ -89,11 +89,12 @@ def register_on_model(entry: ModelEntry, data: TactileData, geom: LocalGeometry,
     model = entry.model
     scale = conversion(data.units, getattr(model, "units", None))
     points = data.points * scale
+    curves = [c * scale for c in data.curves]
     register = get_registrar(method, model.kind)
     orientations = [(1, geom)] if geom.oriented else [(1, geom), (-1, geom.flipped())]
     results = []
     for sign, g in orientations:
-        r = register(model, entry.table, _scaled(g, scale), points, **options)
+        r = register(model, entry.table, _scaled(g, scale), points, curves=curves, **options)
         results.append(dataclasses.replace(r, normal_sign=sign, scale=scale))
     ok = [r for r in results if r.ok]
     if not ok:

@@ -10,18 +10,18 @@ from __future__ import annotations
 from typing import Callable
 
 from ..errors import InputError
-from . import closedform_paper
+from . import closedform_paper, mesh_paper
 from .result import Registration, local_frame
 
 __all__ = ["METHODS", "DEFAULT_METHOD", "Registration", "local_frame", "get_registrar", "method_defaults"]
 
 METHODS: dict[str, dict[str, Callable[..., Registration]]] = {
-    "paper": {"closed-form": closedform_paper.register},
+    "paper": {"closed-form": closedform_paper.register, "mesh": mesh_paper.register},
 }
 
 #: per method and model kind, the default options (e.g. the lookup tolerance)
 DEFAULTS: dict[str, dict[str, dict]] = {
-    "paper": {"closed-form": closedform_paper.DEFAULTS},
+    "paper": {"closed-form": closedform_paper.DEFAULTS, "mesh": mesh_paper.DEFAULTS},
 }
 
 DEFAULT_METHOD = "paper"
