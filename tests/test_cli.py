@@ -121,3 +121,10 @@ def test_bench_paper_example_runs_and_writes_its_table(tmp_path, capsys):
     noise_free = [r for r in table["rows"] if r["noise"] == 0 and r["spacing"] == 0.005][0]
     assert max(noise_free["max"]) < 1e-3
     assert "Section 4.3.1" in capsys.readouterr().out
+
+
+def test_bench_paper_table4_reports_every_model(tmp_path, capsys):
+    assert main(["bench", "paper-table4", "--out", str(tmp_path), "--quiet"]) == 0
+    table = json.loads((tmp_path / "paper-table4.json").read_text())
+    assert len(table["models"]) == 10 and all(r["sample_vertices"] > 20 for r in table["models"].values())
+    assert "Elephant" in capsys.readouterr().out

@@ -210,3 +210,14 @@ def test_paper_mesh_registration_walks_to_the_touched_vertex():
     assert reg.ok and reg.candidates == 1 and np.isclose(reg.error, e)
     mapped = touch.points @ reg.rotation.T + reg.translation
     assert np.mean(m.distance(mapped)) < 0.05
+
+
+def test_p3_contacts_are_at_least_15_rings_apart():
+    from tactrec.simulation import spread_vertices
+
+    m = load_model("apple")
+    chosen = spread_vertices(m, 10, rings=15, rng=3)
+    assert len(chosen) == 10 and np.array_equal(chosen, spread_vertices(m, 10, rings=15, rng=3))
+    for v in chosen:
+        near = set(m.ring(int(v), 15).tolist())
+        assert not near & (set(chosen.tolist()) - {int(v)})

@@ -16,7 +16,7 @@ from scipy.spatial.transform import Rotation
 from .io.touch import TactileData
 from .surfaces.base import SurfaceModel
 
-__all__ = ["simulate_touch", "simulate_random_touch", "random_rigid_motion"]
+__all__ = ["simulate_touch", "simulate_random_touch", "random_rigid_motion", "spread_vertices"]
 
 
 def random_rigid_motion(rng, *, extent: float) -> tuple[np.ndarray, np.ndarray]:
@@ -117,3 +117,22 @@ def simulate_random_touch(model: SurfaceModel, *, rng=None, attempts: int = 200,
         except ValueError as exc:
             last = exc
     raise ValueError(f"no touch on {model.name} stayed on the surface in {attempts} attempts ({last})")
+
+
+def spread_vertices(model, count: int, *, rings: int = 15, rng=None) -> np.ndarray:
+    """``count`` random vertices of a mesh, no two within ``rings`` rings (protocol P3).
+
+    Vertices are drawn in a random order and kept when no kept vertex lies in
+    their ``rings``-ring; fewer than ``count`` come back if the mesh runs out.
+    """
+    rng = np.random.default_rng(rng)
+    blocked = np.zeros(len(model.vertices), dtype=bool)
+    chosen = []
+    for v in rng.permutation(len(model.vertices)):
+        if len(chosen) == count:
+            break
+        if blocked[v]:
+            continue
+        chosen.append(int(v))
+        blocked[model.ring(int(v), rings)] = True
+    return np.array(chosen, dtype=np.int64)

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import Callable
 
-from . import paper_closedform, paper_example
+from . import paper_closedform, paper_example, paper_mesh
 
 __all__ = ["BENCHMARKS"]
 
@@ -17,4 +17,5 @@ BENCHMARKS: dict[str, Callable[..., dict]] = {
     "paper-table2": paper_closedform.run_table2,
     "paper-table3": paper_closedform.run_table3,
     "paper-example": paper_example.run,
+    "paper-table4": paper_mesh.run_table4,
 }
