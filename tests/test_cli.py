@@ -128,3 +128,15 @@ def test_bench_paper_table4_reports_every_model(tmp_path, capsys):
     table = json.loads((tmp_path / "paper-table4.json").read_text())
     assert len(table["models"]) == 10 and all(r["sample_vertices"] > 20 for r in table["models"].values())
     assert "Elephant" in capsys.readouterr().out
+
+
+@pytest.mark.slow
+def test_bench_paper_fig11_shares_walks_across_deltas(tmp_path):
+    from tactrec.bench.paper_fig11 import run_fig11
+
+    table = run_fig11(out=tmp_path, instances=1, jobs=1, quiet=True, models=("apple",),
+                      sweeps={"delta": [0.01, 0.03], "length": [24.0], "angle": [60.0]})
+    record = table["records"][0]["results"]
+    small, large = record["0.01"], record["0.03"]
+    assert small["candidates"]["apple"] <= large["candidates"]["apple"] and small["seconds"] <= large["seconds"]
+    assert large["correct"] and (tmp_path / "paper-fig11.json").exists() and (tmp_path / "paper-fig11.png").exists()

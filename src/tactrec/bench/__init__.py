@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import Callable
 
-from . import paper_closedform, paper_example, paper_mesh
+from . import paper_closedform, paper_example, paper_fig11, paper_mesh
 
 __all__ = ["BENCHMARKS"]
 
@@ -18,4 +18,5 @@ BENCHMARKS: dict[str, Callable[..., dict]] = {
     "paper-table3": paper_closedform.run_table3,
     "paper-example": paper_example.run,
     "paper-table4": paper_mesh.run_table4,
+    "paper-fig11": paper_fig11.run_fig11,
 }
