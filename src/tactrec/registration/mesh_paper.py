@@ -23,7 +23,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..estimation import LocalGeometry
-from ..surfaces.mesh import MeshModel
+from ..surfaces.mesh import MeshModel, resample_polyline
 from ..tables import CurvatureTable
 from .result import Registration, local_frame
 
@@ -149,18 +149,7 @@ class MeshSuperposition:
                     total, count = np.inf, 1
                     break
                 line, closed = found
-                seg = np.linalg.norm(np.diff(line, axis=0), axis=1)
-                arc = np.concatenate([[0.0], np.cumsum(seg)])
-                a, b = line[:-1], line[1:]
-                ab = b - a
-                t = np.clip(np.sum((anchor - a) * ab, axis=1) / np.maximum(np.sum(ab * ab, axis=1), 1e-300), 0, 1)
-                k = int(np.argmin(np.linalg.norm(a + t[:, None] * ab - anchor, axis=1)))
-                s0 = arc[k] + t[k] * seg[k]
-                direction = 1.0 if ab[k] @ along >= 0 else -1.0
-                targets = s0 + direction * off
-                if closed:
-                    targets = np.mod(targets, arc[-1])
-                ref = np.stack([np.interp(targets, arc, line[:, i]) for i in range(3)], axis=1)
+                ref = resample_polyline(line, anchor, along, off, closed=closed)
                 total += float(np.sum(np.linalg.norm(pts - ref, axis=1)))
                 count += len(pts)
             e = total / count

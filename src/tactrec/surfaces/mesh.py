@@ -31,7 +31,7 @@ from scipy import sparse
 from ..errors import InputError
 from .base import SiteFrame, SurfaceModel, TableSamples
 
-__all__ = ["MeshModel", "MESH_SUFFIXES", "paraboloid_curvatures"]
+__all__ = ["MeshModel", "MESH_SUFFIXES", "paraboloid_curvatures", "resample_polyline"]
 
 MESH_SUFFIXES = (".ply", ".obj", ".stl", ".off")
 STRAY_FRACTION = 0.01
@@ -337,33 +337,44 @@ class MeshModel(SurfaceModel):
                 best, best_d = line, d
         if best is None or best_d > 1e-6 * max(self.size, 1e-300) + 1e-9:
             raise ValueError("the plane section does not pass through the site")
-        seg = np.linalg.norm(np.diff(best, axis=0), axis=1)
-        arc = np.concatenate([[0.0], np.cumsum(seg)])
-        closed = np.allclose(best[0], best[-1])
-        # arc position of p: project on the nearest segment
-        a, b = best[:-1], best[1:]
-        ab = b - a
-        tt = np.clip(np.sum((p - a) * ab, axis=1) / np.maximum(np.sum(ab * ab, axis=1), 1e-300), 0, 1)
-        dist = np.linalg.norm(a + tt[:, None] * ab - p, axis=1)
-        k = int(np.argmin(dist))
-        s0 = arc[k] + tt[k] * seg[k]
-        # orient along the tangent
-        direction = 1.0 if (ab[k] @ t) >= 0 else -1.0
-        targets = s0 + direction * (np.arange(count) - (count - 1) / 2.0) * spacing
-        total = arc[-1]
-        if closed:
-            targets = np.mod(targets, total)
-        elif targets.min() < -1e-9 or targets.max() > total + 1e-9:
-            raise ValueError("a section curve runs off the edge of the mesh")
-        return np.stack([np.interp(targets, arc, best[:, i]) for i in range(3)], axis=1)
+        offsets = (np.arange(count) - (count - 1) / 2.0) * spacing
+        return resample_polyline(best, p, t, offsets, closed=bool(np.allclose(best[0], best[-1])), strict=True)
+
+
+def _project_on_polyline(line: np.ndarray, p: np.ndarray) -> tuple[int, float, float]:
+    """Nearest segment ``k`` of ``line`` to ``p``, the parameter ``t`` in [0, 1]
+    of the nearest point on it, and the distance."""
+    a, b = line[:-1], line[1:]
+    ab = b - a
+    t = np.clip(np.sum((p - a) * ab, axis=1) / np.maximum(np.sum(ab * ab, axis=1), 1e-300), 0.0, 1.0)
+    dist = np.linalg.norm(a + t[:, None] * ab - p, axis=1)
+    k = int(np.argmin(dist))
+    return k, float(t[k]), float(dist[k])
 
 
 def _segment_distance(line: np.ndarray, p: np.ndarray) -> float:
     """Distance from ``p`` to the polyline ``line``."""
-    a, b = line[:-1], line[1:]
-    ab = b - a
-    t = np.clip(np.sum((p - a) * ab, axis=1) / np.maximum(np.sum(ab * ab, axis=1), 1e-300), 0.0, 1.0)
-    return float(np.min(np.linalg.norm(a + t[:, None] * ab - p, axis=1)))
+    return _project_on_polyline(line, p)[2]
+
+
+def resample_polyline(line: np.ndarray, anchor: np.ndarray, along: np.ndarray, offsets: np.ndarray, *,
+                      closed: bool, strict: bool = False) -> np.ndarray:
+    """Points of ``line`` at arc-length ``offsets`` from the point nearest ``anchor``,
+    positive offsets in the direction of ``along``.
+
+    On a closed loop the offsets wrap around; on an open line they stop at its
+    ends, or (``strict``) raise ``ValueError`` where they would run past them.
+    """
+    seg = np.linalg.norm(np.diff(line, axis=0), axis=1)
+    arc = np.concatenate([[0.0], np.cumsum(seg)])
+    k, t, _ = _project_on_polyline(line, anchor)
+    direction = 1.0 if (line[k + 1] - line[k]) @ along >= 0 else -1.0
+    targets = arc[k] + t * seg[k] + direction * np.asarray(offsets, dtype=float)
+    if closed:
+        targets = np.mod(targets, arc[-1])
+    elif strict and (targets.min() < -1e-9 or targets.max() > arc[-1] + 1e-9):
+        raise ValueError("a section curve runs off the edge of the mesh")
+    return np.stack([np.interp(targets, arc, line[:, i]) for i in range(3)], axis=1)
 
 
 def clean_mesh(vertices: np.ndarray, faces: np.ndarray):
