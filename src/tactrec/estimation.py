@@ -184,6 +184,7 @@ def fit_curve(points: np.ndarray, contact: np.ndarray, *, window: int | str | No
 
 
 GAMMA = 3.5        # half-width of the confidence intervals, in standard errors
+FACETS = 4.0       # smallest window, in straight pieces of a polyline, each side of p
 BIAS_LIMIT = 0.3   # windows no wider than this over kappa: a parabola's relative bias ~ 0.21 (h kappa)^2
 
 
@@ -196,12 +197,29 @@ def _noise_level(points: np.ndarray) -> float:
     return float(np.median(np.abs(d3)) / 0.6745 / np.sqrt(20.0))
 
 
+def _facet_length(points: np.ndarray) -> float:
+    """Points per straight piece of the curve: about 1 for a smooth or noisy
+    curve, ``m`` for a polyline whose corners are ``m`` points apart (a plane
+    section of a triangle mesh).  The participation ratio of the turning
+    angles, ``(sum theta)^2 / sum theta^2``, counts the points that carry the
+    turning."""
+    chords = np.diff(points, axis=0)
+    chords = chords / np.maximum(np.linalg.norm(chords, axis=1, keepdims=True), 1e-300)
+    theta = np.arccos(np.clip(np.sum(chords[1:] * chords[:-1], axis=1), -1.0, 1.0))
+    total = float(np.sum(theta))
+    if total <= 0.0:
+        return 1.0
+    return max(1.0, len(theta) * float(np.sum(theta * theta)) / (total * total))
+
+
 def _fit_adaptive(points: np.ndarray, contact: np.ndarray, i0: int, degree: int) -> CurveFit:
     sigma = _noise_level(points)
     plane = _sampling_plane(points)          # the whole curve fixes its plane best
     n_side = max(i0, len(points) - 1 - i0)
-    widths = sorted({w for w in np.unique(np.round(np.geomspace(4, max(n_side, 4), 12)).astype(int))
-                     if w >= 4} | {n_side})
+    # a window must span a few straight pieces: below that, it sees the facets, not the surface
+    smallest = min(n_side, max(4, int(np.ceil(FACETS * _facet_length(points)))))
+    widths = sorted({w for w in np.unique(np.round(np.geomspace(smallest, max(n_side, smallest), 12)).astype(int))
+                     if w >= smallest} | {n_side})
     best = None
     lo = np.array([-np.inf, -np.inf])
     hi = np.array([np.inf, np.inf])
