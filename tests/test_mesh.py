@@ -221,3 +221,75 @@ def test_p3_contacts_are_at_least_15_rings_apart():
     for v in chosen:
         near = set(m.ring(int(v), 15).tolist())
         assert not near & (set(chosen.tolist()) - {int(v)})
+
+
+def _reference_error(m, problem, v, phi):
+    """Eq. 15 the slow, obvious way: trimesh's plane-mesh intersection segments,
+    chained into polylines, the one through the anchor resampled at the offsets."""
+    import trimesh
+
+    from tactrec.surfaces.mesh import resample_polyline
+
+    tm = trimesh.Trimesh(m.vertices, m.faces, process=False)
+    F = m.vertex_frames([v])[0]
+    c, s = np.cos(phi), np.sin(phi)
+    M = F @ np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    q = m.vertices[v]
+    total, count = 0.0, 0
+    for i in range(problem.ncurves):
+        x = problem.points[0][problem.point_curve == i]            # phi = 0: the data curve, local frame
+        off = problem.point_offset[problem.point_curve == i]
+        pts = x @ M.T + q
+        centre = pts.mean(axis=0)
+        _, _, vt = np.linalg.svd(pts - centre)
+        normal, along = vt[2], (vt[0] if (pts[-1] - pts[0]) @ vt[0] >= 0 else -vt[0])
+        anchor = q - ((q - centre) @ normal) * normal
+        segs = trimesh.intersections.mesh_plane(tm, normal, centre)
+        # chain segments into the polyline through the anchor
+        key = lambda p: tuple(np.round(p, 9))
+        ends = {}
+        for k, (a, b) in enumerate(segs):
+            ends.setdefault(key(a), []).append((k, 1))
+            ends.setdefault(key(b), []).append((k, 0))
+        mids = segs.mean(axis=1)
+        start = int(np.argmin(np.linalg.norm(mids - anchor, axis=1)))
+
+        seen = {start}
+
+        def follow(k, end):
+            chain = []
+            while True:
+                p = segs[k, end]
+                chain.append(p)
+                nxt = [(j, e) for j, e in ends[key(p)] if j != k]
+                if not nxt or nxt[0][0] == start:
+                    return chain, bool(nxt)
+                k, e = nxt[0]
+                seen.add(k)
+                end = e
+        forward, closed = follow(start, 1)
+        line = np.array([segs[start, 0]] + forward) if closed else np.array(follow(start, 0)[0][::-1] + forward)
+        ref = resample_polyline(line, anchor, along, off, closed=closed)
+        total += float(np.sum(np.linalg.norm(pts - ref, axis=1)))
+        count += len(pts)
+    return total / count
+
+
+def test_eq15_error_matches_a_direct_computation():
+    """The batched section marching gives the same E(v, phi) as trimesh's
+    plane intersection chained by hand, at vertices near and far from the touch."""
+    from tactrec.estimation import estimate
+    from tactrec.registration import mesh_paper
+    from tactrec.simulation import simulate_touch
+
+    m = load_model("pear")
+    touch = simulate_touch(m, [2000], points=41, spacing=0.3, angle=60.0, rng=1)
+    geom = estimate(touch)
+    problem = mesh_paper.MeshSuperposition(m, geom, touch.curves, phi_step=30.0)
+    vertices = np.array([2000, *m.rings(2000, 2)[2][:2], 100, 5000])
+    E = problem._errors(vertices)                                      # (vertices, phis)
+    assert E.shape == (5, 12) and np.all(np.isfinite(E))
+    for a, v in enumerate(vertices):
+        for b in (0, 4, 7):
+            assert np.isclose(E[a, b], _reference_error(m, problem, int(v), problem.phis[b]), rtol=1e-6, atol=1e-9)
+    assert E[0].min() < 0.5 * E[3:].min()                              # touched vertex vs far away

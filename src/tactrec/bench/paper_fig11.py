@@ -10,7 +10,8 @@ in 0.005..0.03, ``l`` in 9..24 mm, ``phi`` in 10..60 degrees.
 The greedy walk from one candidate does not depend on the other candidates,
 so one recognition at the largest ``delta`` gives every smaller ``delta``
 too: its candidates are a subset, its error the minimum over the subset's
-walks, its time the subset's share.  The ``l`` and ``phi`` sweeps need touches
+walks, its time the recognition's time per evaluated vertex times the
+vertices the subset's walks evaluate.  The ``l`` and ``phi`` sweeps need touches
 of their own.
 """
 
@@ -68,26 +69,26 @@ def _touch(task):
     for other in db.entries:
         table = other.table
         rows = table.candidates(geom.k1, geom.k2, max(deltas))
+        t0 = time.perf_counter()
         problem = mesh_paper.MeshSuperposition(other.model, geom, touch.curves, phi_step=10.0)
-        found = []
-        for row in rows:
-            t0 = time.perf_counter()
-            _, e, _ = problem.walk(int(table.samples.sites[row, 0]), max_steps=mesh_paper.DEFAULTS["max_steps"])
-            dk = float(np.hypot(table.samples.k1[row] - geom.k1, table.samples.k2[row] - geom.k2))
-            found.append((dk, e, time.perf_counter() - t0))
-        walks[other.name] = found
+        found = problem.walks(table.samples.sites[rows, 0].astype(np.int64),
+                              max_steps=mesh_paper.DEFAULTS["max_steps"])
+        dk = np.hypot(table.samples.k1[rows] - geom.k1, table.samples.k2[rows] - geom.k2)
+        walks[other.name] = (dk, found, time.perf_counter() - t0, max(problem.evaluated, 1))
     results = {}
     for delta in deltas:
         errors = {}
         seconds = overhead
-        for name, found in walks.items():
-            subset = [(e, s) for dk, e, s in found if dk < delta]
-            errors[name] = min((e for e, _ in subset), default=np.inf)
-            seconds += sum(s for _, s in subset)
+        for name, (dk, found, elapsed, evaluated) in walks.items():
+            subset = [w for w, d in zip(found, dk) if d < delta]
+            errors[name] = min((w[1] for w in subset), default=np.inf)
+            # a smaller delta's walks are a subset: charged their share of the vertices evaluated
+            needed = len(set().union(*(w[3] for w in subset))) if subset else 0
+            seconds += elapsed * needed / evaluated
         best = min(errors, key=errors.get)
         best = best if np.isfinite(errors[best]) else None
         results[str(delta)] = {"recognized": best, "correct": best == entry.name, "seconds": seconds,
-                               "candidates": {n: sum(1 for dk, _, _ in f if dk < delta) for n, f in walks.items()}}
+                               "candidates": {n: int(np.sum(w[0] < delta)) for n, w in walks.items()}}
     return {"model": entry.name, "vertex": vertex, "length": length, "angle": angle, "results": results}
 
 

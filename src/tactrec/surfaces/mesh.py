@@ -42,6 +42,14 @@ def _unit_rows(a: np.ndarray) -> np.ndarray:
     return a / np.where(norm > 0, norm, 1.0)
 
 
+def _tangents(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``d1, d2 (n, 3)`` completing unit ``normal (n, 3)`` to right-handed frames:
+    ``d1`` is the coordinate axis least aligned with the normal, projected."""
+    helper = np.eye(3)[np.argmin(np.abs(normal), axis=1)]
+    d1 = _unit_rows(helper - np.sum(helper * normal, axis=1, keepdims=True) * normal)
+    return d1, np.cross(normal, d1)
+
+
 class MeshModel(SurfaceModel):
     """A triangle mesh (paper Section 5).
 
@@ -159,6 +167,27 @@ class MeshModel(SurfaceModel):
         rows = self.faces.ravel()
         cols = np.repeat(np.arange(m), 3)
         return sparse.csr_matrix((np.ones(3 * m, dtype=np.int8), (rows, cols)), shape=(len(self.vertices), m))
+
+    @cached_property
+    def face_neighbours(self) -> tuple[np.ndarray, np.ndarray]:
+        """Across-edge adjacency: ``(face (F, 3), edge (F, 3))``, for edge ``k`` of
+        face ``f`` (corners ``k, k+1 mod 3``) the face on its other side (-1 on the
+        boundary) and that face's index of the same edge.  Where more than two
+        faces share an edge, the first two are paired."""
+        m = len(self.faces)
+        a = self.faces
+        b = np.roll(self.faces, -1, axis=1)
+        key = (np.minimum(a, b) * len(self.vertices) + np.maximum(a, b)).ravel()     # (3F,), edge f*3+k
+        order = np.argsort(key, kind="stable")
+        ks = key[order]
+        pair = np.nonzero(ks[1:] == ks[:-1])[0]
+        pair = pair[np.r_[True, pair[1:] != pair[:-1] + 1]] if len(pair) else pair  # first two of a run
+        face = np.full(3 * m, -1, dtype=np.int64)
+        edge = np.full(3 * m, -1, dtype=np.int64)
+        i, j = order[pair], order[pair + 1]
+        face[i], face[j] = j // 3, i // 3
+        edge[i], edge[j] = j % 3, i % 3
+        return face.reshape(m, 3), edge.reshape(m, 3)
 
     def rings(self, vertex: int, k: int) -> list[np.ndarray]:
         """Vertices at exactly 0, 1, ..., k edges from ``vertex`` (breadth first)."""
@@ -299,9 +328,14 @@ class MeshModel(SurfaceModel):
             normal = _unit_rows(b @ self.vertex_normals[corners])
         else:
             raise ValueError("a mesh site is [vertex] or [face, b1, b2]")
-        helper = np.eye(3)[int(np.argmin(np.abs(normal)))]
-        d1 = _unit_rows(helper - (helper @ normal) * normal)
-        return SiteFrame(site, point, d1, np.cross(normal, d1), normal)
+        d1, d2 = _tangents(normal[None])
+        return SiteFrame(site, point, d1[0], d2[0], normal)
+
+    def vertex_frames(self, vertices) -> np.ndarray:
+        """``(n, 3, 3)`` frames of ``vertices (n,)``, columns ``[d1 d2 n]`` as in :meth:`site_frame`."""
+        normal = self.vertex_normals[np.asarray(vertices, dtype=np.int64)]
+        d1, d2 = _tangents(normal)
+        return np.stack([d1, d2, normal], axis=2)
 
     def locate(self, point) -> np.ndarray:
         """``[face, b1, b2]`` of the surface point nearest to ``point``."""
@@ -365,6 +399,8 @@ def resample_polyline(line: np.ndarray, anchor: np.ndarray, along: np.ndarray, o
     On a closed loop the offsets wrap around; on an open line they stop at its
     ends, or (``strict``) raise ``ValueError`` where they would run past them.
     """
+    # repeated points (a plane through a mesh vertex) would leave the direction undefined
+    line = line[np.r_[True, np.linalg.norm(np.diff(line, axis=0), axis=1) > 0]]
     seg = np.linalg.norm(np.diff(line, axis=0), axis=1)
     arc = np.concatenate([[0.0], np.cumsum(seg)])
     k, t, _ = _project_on_polyline(line, anchor)
