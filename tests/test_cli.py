@@ -140,3 +140,46 @@ def test_bench_paper_fig11_shares_walks_across_deltas(tmp_path):
     small, large = record["0.01"], record["0.03"]
     assert small["candidates"]["apple"] <= large["candidates"]["apple"] and small["seconds"] <= large["seconds"]
     assert large["correct"] and (tmp_path / "paper-fig11.json").exists() and (tmp_path / "paper-fig11.png").exists()
+
+
+@pytest.mark.slow
+def test_closed_form_and_ycb_database_built_once_used_and_updated(tmp_path, capsys):
+    """All closed-form built-ins plus the ten YCB scans (as files, in metres) in one
+    database: built once, used by ``recognize --db`` on many touches, and after one
+    scan changes only that scan is rebuilt."""
+    import trimesh
+
+    from tactrec.surfaces import BUILTIN_SETS, builtin_path
+
+    scans = []
+    for name in BUILTIN_SETS["paper-fig11"]:
+        scans.append(tmp_path / f"{name}.stl")
+        shutil.copy(builtin_path(name), scans[-1])
+    db = tmp_path / "db"
+    assert main(["build", "closed-form", *map(str, scans), "--units", "m", "--out", str(db)]) == 0
+    assert "18 built, 0 unchanged" in capsys.readouterr().out
+    touches = []
+    for k, name in enumerate(BUILTIN_SETS["paper-table1"]):
+        touches.append(tmp_path / f"touch-{name}.json")
+        assert main(["simulate", name, "--out", str(touches[-1]), "--spacing", "0.02", "--noise", "0.0005",
+                     "--seed", str(k), "--quiet"]) == 0
+    for scan, vertex in ((scans[0], 1580), (scans[4], 3475)):                      # banana, mug
+        # P3 settings in the scans' units: 81 points 0.3 mm apart
+        touches.append(tmp_path / f"touch-{scan.stem}.json")
+        assert main(["simulate", str(scan), "--units", "m", "--vertex", str(vertex), "--points", "81",
+                     "--spacing", "0.0003", "--out", str(touches[-1]), "--seed", "1", "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["recognize", *map(str, touches), "--db", str(db), "--json"]) == 0
+    results = [json.loads(line) for line in capsys.readouterr().out.strip().splitlines()]
+    assert [r["file"] for r in results] == list(map(str, touches))
+    for r, t in zip(results, touches):
+        assert len(r["ranking"]) == 18
+        assert r["best"] == t.stem.removeprefix("touch-")
+    # the meshes are in metres: the default lookup tolerance is the paper's 0.03 /mm = 30 /m
+    assert all(r["ranking"][0]["candidates"] > 0 for r in results[-2:])
+    # one scan changes (same shape written as ASCII STL): only it is rebuilt
+    changed = trimesh.load(scans[3], force="mesh")
+    changed.export(scans[3], file_type="stl_ascii")
+    assert main(["build", "closed-form", *map(str, scans), "--units", "m", "--out", str(db)]) == 0
+    out = capsys.readouterr().out
+    assert "1 built, 17 unchanged" in out and f"built    {scans[3].stem}" in out

@@ -32,7 +32,7 @@ from .surfaces import KINDS, load_model, resolve_models
 from .tables import CurvatureTable
 
 __all__ = ["Database", "BuildReport", "build_database", "load_database", "build_entries", "file_sha256",
-           "open_models"]
+           "open_models", "cache_folder", "cached_database"]
 
 FORMAT = "tactrec-db"
 VERSION = 1
@@ -250,3 +250,25 @@ def open_models(*, db=None, models=None, warn=None, quiet: bool = True, units=No
     if db is not None:
         return load_database(db, warn=warn)
     return build_entries(models, quiet=quiet, units=units, scale=scale)
+
+
+def cache_folder() -> Path:
+    """Where tactrec keeps databases it builds for itself (the demo's):
+    ``$TACTREC_CACHE``, else ``$XDG_CACHE_HOME/tactrec``, else ``~/.cache/tactrec``."""
+    if os.environ.get("TACTREC_CACHE"):
+        return Path(os.environ["TACTREC_CACHE"])
+    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    return Path(base) / "tactrec"
+
+
+def cached_database(models: Iterable, *, name: str, quiet: bool = True) -> Database:
+    """``models`` as a database in the cache folder ``name``: built the first
+    time, then reused while the sources are unchanged.  Falls back to building
+    in memory where the cache cannot be written."""
+    models = list(models)
+    folder = cache_folder() / name
+    try:
+        build_database(models, folder, quiet=quiet)
+    except OSError:
+        return build_entries(models, quiet=quiet)
+    return load_database(folder)

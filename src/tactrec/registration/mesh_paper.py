@@ -35,12 +35,13 @@ from scipy import sparse
 from ..estimation import LocalGeometry
 from ..surfaces.mesh import MeshModel
 from ..tables import CurvatureTable
+from ..units import conversion
 from .result import Registration, local_frame
 
-__all__ = ["register", "DEFAULTS", "MeshSuperposition"]
+__all__ = ["register", "DEFAULTS", "MeshSuperposition", "default_delta"]
 
 DEFAULTS = {
-    "delta": 0.03,          # lookup tolerance, 1/model units (the paper's P3 default, per mm)
+    "delta": None,          # lookup tolerance, 1/model units; None: the paper's 0.03 /mm in the model's units
     "phi_step": 10.0,       # degrees (Section 5.3.1)
     "max_steps": 200,       # greedy walk steps from one candidate
 }
@@ -329,17 +330,33 @@ class MeshSuperposition:
         return self._frame(v) @ _rot_z(np.array([phi]))[0] @ self.L
 
 
+#: the paper's lookup tolerance for meshes (P3), per millimetre
+PAPER_DELTA_PER_MM = 0.03
+
+
+def default_delta(model: MeshModel) -> float:
+    """The paper's 0.03 /mm in ``model``'s units (per model unit if it has none)."""
+    return PAPER_DELTA_PER_MM * (conversion(model.units, "mm") if model.units else 1.0)
+
+
 def register(model: MeshModel, table: CurvatureTable, geometry: LocalGeometry, points: np.ndarray, *,
-             curves=None, delta: float = DEFAULTS["delta"], phi_step: float = DEFAULTS["phi_step"],
+             curves=None, delta: float | None = DEFAULTS["delta"], phi_step: float = DEFAULTS["phi_step"],
              max_steps: int = DEFAULTS["max_steps"], candidates: np.ndarray | None = None,
              **_ignored) -> Registration:
-    """Register the data curves onto ``model`` from the lookup candidates (eq. 16)."""
+    """Register the data curves onto ``model`` from the lookup candidates (eq. 16).
+
+    ``delta`` is in 1/model units; by default the paper's 0.03 /mm converted
+    to them (30 /m for a mesh in metres)."""
     if curves is None:
         raise ValueError("mesh registration needs the data curves")
+    if delta is None:
+        delta = default_delta(model)
     idx = table.candidates(geometry.k1, geometry.k2, delta) if candidates is None else np.asarray(candidates)
     if len(idx) == 0:
         return Registration.rejection(model.name, "no candidates")
     problem = MeshSuperposition(model, geometry, curves, phi_step=phi_step)
+    if problem.radius > model.size:
+        return Registration.rejection(model.name, "the touch is larger than the model")
     found = problem.walks(table.samples.sites[idx, 0].astype(np.int64), max_steps=max_steps)
     v, e, phi, _ = min(found, key=lambda w: w[1])
     if not np.isfinite(e):
