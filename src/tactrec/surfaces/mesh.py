@@ -277,6 +277,30 @@ class MeshModel(SurfaceModel):
                                                  sizes=sizes)
         return k1, k2
 
+    def curvature_field(self, *, radius: float | None = None, most: int = 96
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Principal curvatures and the first principal direction at every vertex.
+
+        One weighted paraboloid fit (eq. 14) per vertex to the vertices within
+        ``radius`` (default three mean edges; at most ``most`` of them, at least
+        the nearest 12) whose normals agree with its own, so a thin wall's
+        other side is left out; all vertices at once.  Returns ``k1, k2 (V,)``
+        (``k1 >= k2``, outward normals) and ``d1 (V, 3)``, a unit tangent.
+        """
+        from scipy.spatial import cKDTree
+
+        radius = 3.0 * self.mean_edge if radius is None else float(radius)
+        count = min(most, len(self.vertices))
+        dist, idx = cKDTree(self.vertices).query(self.vertices, k=count)
+        frames = self.vertex_frames(np.arange(len(self.vertices)))                     # (V, 3, 3) [t1 t2 n]
+        local = np.einsum("vkj,vji->vki", self.vertices[idx] - self.vertices[:, None, :], frames)
+        agree = np.einsum("vkj,vj->vk", self.vertex_normals[idx], self.vertex_normals) > 0.5
+        weight = (agree & ((dist <= radius) | (np.arange(count) < 12))).astype(float)
+        k1, k2, (u, v) = quadric_curvatures(local, weight)
+        t1, t2, n = frames[:, :, 0], frames[:, :, 1], frames[:, :, 2]
+        d1 = u[:, None] * t1 + v[:, None] * t2 + 0.0 * n
+        return k1, k2, _unit_rows(d1)
+
     def table_samples(self, *, resolution=None, rng=0) -> TableSamples:
         """The paper's mesh table: sampled vertices with fitted curvatures."""
         sample = self.sample_vertices(rng=rng)
@@ -461,6 +485,42 @@ def clean_mesh(vertices: np.ndarray, faces: np.ndarray):
     report["vertices"] = int(len(vertices))
     report["faces"] = int(len(faces))
     return vertices, faces, report
+
+
+def quadric_curvatures(local: np.ndarray, weight: np.ndarray):
+    """Principal curvatures at the origin of ``z = a x^2 + b xy + c y^2 + d x + e y + f``
+    fitted (weighted least squares) to points ``local (n, k, 3)`` given in
+    frames ``(t1, t2, N)``, ``n`` fits at once; ``weight (n, k)``.
+
+    Returns ``k1, k2 (n,)`` (``k1 >= k2``; a surface bending away from ``N``
+    has negative curvature) and the ``(t1, t2)`` components ``(2, n)`` of the
+    first principal direction, projected on the tangent plane and unit.
+    """
+    x, y, z = local[..., 0], local[..., 1], local[..., 2]
+    scale = np.maximum(np.max(np.hypot(x, y) * (weight > 0), axis=-1), 1e-12)[..., None]
+    X, Y = x / scale, y / scale
+    A = np.stack([X * X, X * Y, Y * Y, X, Y, np.ones_like(X)], axis=-1)               # (n, k, 6)
+    Aw = A * weight[..., None]
+    coef = np.linalg.solve(np.einsum("vki,vkj->vij", Aw, A) + 1e-12 * np.eye(6),
+                           np.einsum("vki,vk->vi", Aw, z)[..., None])[..., 0]
+    s = scale[..., 0]
+    a, b, c = coef[..., 0] / s**2, coef[..., 1] / s**2, coef[..., 2] / s**2
+    d, e = coef[..., 3] / s, coef[..., 4] / s
+    w = np.sqrt(1 + d * d + e * e)
+    E, F, G = 1 + d * d, d * e, 1 + e * e
+    L, M, N = 2 * a / w, b / w, 2 * c / w
+    det = E * G - F * F
+    H = (E * N - 2 * F * M + G * L) / (2 * det)
+    K = (L * N - M * M) / det
+    root = np.sqrt(np.maximum(H * H - K, 0.0))
+    k1, k2 = H + root, H - root
+    # (II - k1 I) v = 0, v from whichever row is larger; (1, 0) where the point is umbilic
+    r1 = np.stack([-(M - k1 * F), L - k1 * E])
+    r2 = np.stack([N - k1 * G, -(M - k1 * F)])
+    v = np.where(np.sum(r1 * r1, axis=0) >= np.sum(r2 * r2, axis=0), r1, r2)
+    norm = np.hypot(v[0], v[1])
+    v = np.where(norm > 1e-300, v / np.where(norm > 1e-300, norm, 1.0), np.array([[1.0], [0.0]]) * np.ones_like(norm))
+    return k1, k2, v
 
 
 def paraboloid_curvatures(center: np.ndarray, normal: np.ndarray, neighbours: np.ndarray, *,
