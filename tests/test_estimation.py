@@ -87,3 +87,30 @@ def test_orientation_from_outward_and_flip(paraboloid):
     assert np.allclose(flipped.normal, -geom.normal)
     assert np.isclose(flipped.k1, -geom.k2) and np.isclose(flipped.k2, -geom.k1)
     assert np.allclose(np.cross(*flipped.directions), flipped.normal)
+
+
+def test_planes_ten_degrees_apart_still_give_an_estimate_one_degree_does_not(paraboloid):
+    """The paper's P3 sweep goes down to planes 10 degrees apart; nearly coincident planes are refused."""
+    from tactrec.errors import InputError
+
+    m, k1, k2, n = paraboloid
+    touch = simulate_touch(m, UV, points=61, spacing=0.004, angle=10.0, noise=0.0, rng=0)
+    dn, dk1, dk2 = _errors(touch, estimate(touch), k1, k2, n)
+    assert dn < 1e-3 and dk1 < 5e-3 and dk2 < 5e-3
+    with pytest.raises(InputError, match="tangent to one another"):
+        estimate(simulate_touch(m, UV, points=61, spacing=0.004, angle=1.0, noise=0.0, rng=0))
+
+
+def test_mesh_sections_are_fitted_over_several_facets():
+    """On a plane section of a triangle mesh (a polyline), the fit spans several straight pieces:
+    the curvature is the surface's, not a single facet's kink."""
+    import trimesh
+
+    from tactrec.surfaces.mesh import MeshModel
+
+    tm = trimesh.creation.icosphere(subdivisions=3, radius=30.0)          # edges about 4 mm
+    m = MeshModel(tm.vertices, tm.faces, name="ball", units="mm")
+    for v in (0, 100, 400):
+        touch = simulate_touch(m, [v], points=81, spacing=0.3, rng=v)
+        geom = estimate(touch)
+        assert abs(geom.k1 + 1 / 30) < 0.006 and abs(geom.k2 + 1 / 30) < 0.006, (v, geom.k1, geom.k2)

@@ -293,3 +293,23 @@ def test_eq15_error_matches_a_direct_computation():
         for b in (0, 4, 7):
             assert np.isclose(E[a, b], _reference_error(m, problem, int(v), problem.phis[b]), rtol=1e-6, atol=1e-9)
     assert E[0].min() < 0.5 * E[3:].min()                              # touched vertex vs far away
+
+
+def test_face_neighbours_pair_faces_across_their_shared_edges():
+    from tactrec.surfaces.mesh import MeshModel
+
+    # a square of two triangles plus a third triangle hanging off the diagonal (a non-manifold edge)
+    vertices = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0.5, 0.5, 1]], dtype=float)
+    faces = np.array([[0, 1, 2], [0, 2, 3], [2, 0, 4]])
+    m = MeshModel(vertices, faces, name="square")
+    face, edge = m.face_neighbours
+    # edge k of face f joins corners k and k+1; across it lies face[f, k], whose edge edge[f, k] is the same
+    for f in range(3):
+        for k in range(3):
+            g = face[f, k]
+            if g < 0:
+                continue
+            assert {*faces[f, [k, (k + 1) % 3]]} == {*faces[g, [edge[f, k], (edge[f, k] + 1) % 3]]}
+            assert face[g, edge[f, k]] == f
+    assert face[0, 0] == -1 and face[1, 1] == -1                # the square's outer edges
+    assert face[0, 2] == 1 and face[2, 0] == -1                 # the diagonal: first two faces paired

@@ -22,11 +22,11 @@ def _plt():
 
 
 def plot_registration(model, curves_model_frame, *, location=None, ax=None, title=None, resolution: int = 60):
-    """Draw a closed-form surface and data curves already mapped into its frame.
+    """Draw a model (closed-form surface or mesh) and data curves already mapped into its frame.
 
     Parameters
     ----------
-    model : ClosedFormSurface
+    model : ClosedFormSurface or MeshModel
     curves_model_frame : list of (n_i, 3) arrays
     location : (3,) array, optional
         The registered contact point.
@@ -35,12 +35,17 @@ def plot_registration(model, curves_model_frame, *, location=None, ax=None, titl
     if ax is None:
         fig = plt.figure(figsize=(6, 5))
         ax = fig.add_subplot(projection="3d")
+    pts = np.zeros((0, 3))
     if hasattr(model, "domain_u"):
         uu, vv = np.meshgrid(np.linspace(model.domain_u.lo, model.domain_u.hi, resolution),
                              np.linspace(model.domain_v.lo, model.domain_v.hi, resolution), indexing="ij")
         pts = model.evaluate(uu, vv)
         ax.plot_surface(pts[..., 0], pts[..., 1], pts[..., 2], color="0.8", alpha=0.35, linewidth=0,
                         antialiased=True, shade=True)
+    elif hasattr(model, "faces"):
+        pts = model.vertices
+        ax.plot_trisurf(pts[:, 0], pts[:, 1], pts[:, 2], triangles=model.faces, color="0.8", alpha=0.3,
+                        linewidth=0, antialiased=True, shade=True)
     colours = ["tab:red", "tab:blue", "tab:green", "tab:orange", "tab:purple"]
     for i, c in enumerate(curves_model_frame):
         ax.plot(c[:, 0], c[:, 1], c[:, 2], color=colours[i % len(colours)], linewidth=2.0, zorder=10)

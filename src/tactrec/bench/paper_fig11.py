@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from ..database import build_entries
+from ..errors import InputError
 from ..estimation import estimate
 from ..registration import mesh_paper
 from ..simulation import simulate_touch, spread_vertices
@@ -64,7 +65,13 @@ def _touch(task):
     points = int(round(length / SPACING)) + 1
     touch = simulate_touch(entry.model, [vertex], points=points, spacing=SPACING, angle=angle, rng=rng)
     start = time.perf_counter()
-    geom = estimate(touch)
+    try:
+        geom = estimate(touch)
+    except InputError as exc:                  # counted as a failure, not the end of the run
+        failed = {"recognized": None, "correct": False, "seconds": time.perf_counter() - start, "errors": {},
+                  "candidates": {m: 0 for m in models}, "failed": str(exc)}
+        return {"model": entry.name, "vertex": vertex, "length": length, "angle": angle, "estimate": None,
+                "diagnosis": None, "results": {str(d): failed for d in deltas}}
     overhead = time.perf_counter() - start
     walks = {}
     for other in db.entries:
@@ -110,6 +117,7 @@ def _touch(task):
 def _why_missed(record: dict, delta) -> str | None:
     """Why a touch was not recognised (None if it was):
 
+    ``estimate_failed``: the curves gave no estimate;
     ``no_candidate``: no table row of the touched model within ``delta``;
     ``truth_fits_worse``: even at the touched vertex (best phi), eq. 15 is
     larger than the winning model's error; ``walk_missed``: the truth fits
@@ -118,6 +126,8 @@ def _why_missed(record: dict, delta) -> str | None:
     result = record["results"][str(delta)]
     if result["correct"]:
         return None
+    if result.get("failed"):
+        return "estimate_failed"
     if result["candidates"][record["model"]] == 0:
         return "no_candidate"
     winner = result["errors"].get(result["recognized"]) if result["recognized"] else None

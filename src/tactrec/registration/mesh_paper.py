@@ -12,19 +12,18 @@ Local search (5.3.2): from every candidate vertex, a greedy walk over
 local minimum.  The registration error is the smallest over the candidates
 (eq. 16).
 
-How it is computed.  Everything happens in the frame of ``v`` (``[d1 d2 n]``
-at the origin), where the data planes for every ``phi`` are fixed, so only
-the mesh patch around ``v`` (faces within 1.5 data radii) is transformed.
-The signed distances of the patch vertices to all ``phi x curves`` planes are
-one matrix product; every triangle the plane crosses gives one segment of the
-section, joining two crossing points keyed by their mesh edge.  The segment
-nearest the anchor (the projection of ``v`` on the plane) is cut there; the
-arc length from the anchor to every other crossing point is a shortest path
-(Dijkstra over the segments, both halves at once), and sorting the crossings
-by it puts each half of the section in order.  The data's arc-length offsets
-are then looked up by binary search.  Many vertices are evaluated together:
-the greedy walks from all candidates advance in step, each step evaluating
-every new neighbour in one batch.
+How it is computed.  Everything for a batch of vertices at once: for each
+vertex and each of the ``phi x curves`` planes, the section starts at the
+crossing segment nearest the anchor (the vertex projected on the plane)
+among the faces within two rings of the vertex, and is followed both ways,
+triangle by triangle through the across-edge adjacency, until it has
+covered the data's arc length (or the mesh ends, or it has taken four times
+as many steps as that length needs at the median edge length).  Which way
+along the section is "forward" is decided by its first few points, not by
+the start segment alone, which has no length where the plane passes through
+a mesh vertex.  The data's arc-length offsets are then looked up by binary
+search.  The greedy walks from all candidates advance in step, each step
+evaluating every new neighbour in one batch.
 """
 
 from __future__ import annotations
