@@ -116,7 +116,10 @@ def refine(model: MeshModel, R: np.ndarray, t: np.ndarray, x: np.ndarray, *, ite
         t = np.einsum("hij,hj->hi", dR, t) + step[:, 3:]
         if np.max(np.abs(step)) < 1e-9:
             break
-    return R, t, _mean_distance(model, R, t, x)
+    if exact:
+        return R, t, _mean_distance(model, R, t, x)
+    moved = np.einsum("hij,mj->hmi", R, x) + t[:, None, :]
+    return R, t, _plane_distance(model, moved)[0].mean(axis=1)
 
 
 def register(model: MeshModel, table: CurvatureTable, geometry: LocalGeometry, points: np.ndarray, *,
@@ -125,6 +128,7 @@ def register(model: MeshModel, table: CurvatureTable, geometry: LocalGeometry, p
              refine_poses: int = DEFAULTS["refine"], iterations: int = DEFAULTS["iterations"],
              umbilic: float = DEFAULTS["umbilic"], final: int = DEFAULTS["final"],
              final_iterations: int = DEFAULTS["final_iterations"], coarse_exact: bool = False,
+             coarse_iterations: int = 0,
              exact_refine: bool = False, **_ignored) -> Registration:
     """Register the data onto ``model``: candidates by curvature rank, poses
     from the principal frames, coarse exact scores, six-DoF refinement."""
@@ -171,6 +175,8 @@ def register(model: MeshModel, table: CurvatureTable, geometry: LocalGeometry, p
                                                               .astype(int)] for cv in curves])
     if coarse_exact:
         coarse = _mean_distance(model, R, t, subset)
+    elif coarse_iterations:
+        R, t, coarse = refine(model, R, t, subset, iterations=coarse_iterations, exact=False)
     else:
         moved = np.einsum("hij,mj->hmi", R, subset) + t[:, None, :]
         coarse = _plane_distance(model, moved)[0].mean(axis=1)
