@@ -180,7 +180,11 @@ def register(model: MeshModel, table: CurvatureTable, geometry: LocalGeometry, p
     else:
         moved = np.einsum("hij,mj->hmi", R, subset) + t[:, None, :]
         coarse = _plane_distance(model, moved)[0].mean(axis=1)
-    keep = np.argsort(coarse)[:refine_poses]
+    # the best rotation of each candidate, then the best candidates: distinct places, not one place
+    # under several rotations
+    order = np.lexsort((coarse, owner))
+    per_candidate = order[np.r_[True, owner[order][1:] != owner[order][:-1]]]
+    keep = per_candidate[np.argsort(coarse[per_candidate])][:refine_poses]
     keep = keep[coarse[keep] < 4.0 * bound + 1e-12] if np.isfinite(bound) else keep
     if len(keep) == 0:
         return Registration.rejection(model.name, f"pruned: coarse error {coarse.min():.3g} cannot beat "
