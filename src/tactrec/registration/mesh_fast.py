@@ -109,8 +109,10 @@ def refine(model: MeshModel, R: np.ndarray, t: np.ndarray, x: np.ndarray, *, ite
             n, closest = model.vertex_normals[v], model.vertices[v]
         r = np.sum((moved - closest) * n, axis=2)                                   # (h, m)
         J = np.concatenate([np.cross(moved, n), n], axis=2)                         # (h, m, 6)
-        step = np.linalg.solve(np.einsum("hmi,hmj->hij", J, J) + 1e-9 * np.eye(6),
-                               -np.einsum("hmi,hm->hi", J, r)[..., None])[..., 0]
+        JtJ = np.einsum("hmi,hmj->hij", J, J)
+        # Levenberg-Marquardt damping: a flat or cylindrical patch leaves directions unconstrained
+        damp = 1e-6 * (np.trace(JtJ, axis1=1, axis2=2)[:, None, None] / 6.0 + 1e-12)
+        step = np.linalg.solve(JtJ + damp * np.eye(6), -np.einsum("hmi,hm->hi", J, r)[..., None])[..., 0]
         dR = _rotations(step[:, :3])
         R = dR @ R
         t = np.einsum("hij,hj->hi", dR, t) + step[:, 3:]
