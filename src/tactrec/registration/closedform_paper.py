@@ -29,7 +29,7 @@ import numpy as np
 from ..estimation import LocalGeometry
 from ..surfaces.closedform import ClosedFormSurface
 from ..tables import CurvatureTable
-from .result import Registration, local_frame
+from .result import Registration, local_frame, rotations_z
 
 __all__ = ["register", "Superposition", "DEFAULTS"]
 
@@ -233,9 +233,7 @@ def register(model: ClosedFormSurface, table: CurvatureTable, geometry: LocalGeo
     if not np.isfinite(E[best]):
         return Registration.rejection(model.name, "registration failed")
     jet = model.frame_jet(uv[best:best + 1, 0], uv[best:best + 1, 1])
-    c, s = np.cos(phi[best]), np.sin(phi[best])
-    Rz = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-    R = jet.frame[0] @ Rz @ L
+    R = jet.frame[0] @ rotations_z(phi[best:best + 1])[0] @ L
     q = jet.point[0]
     return Registration(model=model.name, error=float(E[best]), location=q, rotation=R,
                         translation=q - R @ geometry.contact, candidates=len(idx), site=uv[best],

@@ -35,7 +35,7 @@ from ..estimation import LocalGeometry
 from ..surfaces.mesh import MeshModel
 from ..tables import CurvatureTable
 from ..units import conversion
-from .result import Registration, local_frame
+from .result import Registration, local_frame, rotations_z
 
 __all__ = ["register", "DEFAULTS", "MeshSuperposition", "default_delta"]
 
@@ -58,13 +58,6 @@ def _edge_point(Y: np.ndarray, d: np.ndarray, e: np.ndarray) -> np.ndarray:
     ya = np.take_along_axis(Y, e[..., None, None], axis=-2)[..., 0, :]
     yb = np.take_along_axis(Y, f[..., None, None], axis=-2)[..., 0, :]
     return ya + (da / (da - db)) * (yb - ya)
-
-
-def _rot_z(phis: np.ndarray) -> np.ndarray:
-    c, s = np.cos(phis), np.sin(phis)
-    R = np.zeros((len(phis), 3, 3))
-    R[:, 0, 0], R[:, 0, 1], R[:, 1, 0], R[:, 1, 1], R[:, 2, 2] = c, -s, s, c, 1.0
-    return R
 
 
 class MeshSuperposition:
@@ -105,7 +98,7 @@ class MeshSuperposition:
             alongs.append(along)
         self.radius = max(float(np.max(np.linalg.norm(x, axis=1))) for x in local)
         self.phis = np.deg2rad(np.arange(0.0, 360.0, phi_step))
-        R = _rot_z(self.phis)                                               # (f, 3, 3)
+        R = rotations_z(self.phis)                                               # (f, 3, 3)
         ncurves = len(local)
         # planes p = f * ncurves + i, in the frame of the vertex
         self.normals = np.einsum("fij,cj->fci", R, np.array(normals)).reshape(-1, 3)     # (P, 3)
@@ -120,9 +113,8 @@ class MeshSuperposition:
         # arc length each section must reach, per plane; steps across triangles to get there
         reach = np.array([np.max(np.abs(self.point_offset[self.point_curve == i])) for i in range(ncurves)])
         self.reach = np.tile(reach, len(self.phis)) + 1e-9                                  # (P,)
-        edges = np.linalg.norm(model.vertices[model.faces] - model.vertices[np.roll(model.faces, 1, axis=1)],
-                               axis=-1)
-        self.max_steps_along = int(np.ceil(4.0 * float(reach.max()) / max(float(np.median(edges)), 1e-12))) + 16
+        median_edge = float(np.median(model.edge_lengths))
+        self.max_steps_along = int(np.ceil(4.0 * float(reach.max()) / max(median_edge, 1e-12))) + 16
         self.sign_reach = 2.0 * model.mean_edge
         self._cache: dict[int, tuple[float, float]] = {}
 
@@ -326,7 +318,7 @@ class MeshSuperposition:
 
     def rotation(self, v: int, phi: float) -> np.ndarray:
         """``data2model`` rotation of the superposition at vertex ``v``, angle ``phi``."""
-        return self._frame(v) @ _rot_z(np.array([phi]))[0] @ self.L
+        return self._frame(v) @ rotations_z(np.array([phi]))[0] @ self.L
 
 
 #: the paper's lookup tolerance for meshes (P3), per millimetre

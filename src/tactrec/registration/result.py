@@ -6,7 +6,7 @@ import dataclasses
 
 import numpy as np
 
-__all__ = ["Registration", "local_frame"]
+__all__ = ["Registration", "local_frame", "rotations_z"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -91,3 +91,12 @@ def local_frame(normal: np.ndarray, first: np.ndarray | None = None) -> np.ndarr
     t1 = first - (first @ n) * n
     t1 /= np.linalg.norm(t1)
     return np.stack([t1, np.cross(n, t1), n])
+
+
+def rotations_z(phis: np.ndarray) -> np.ndarray:
+    """``(n, 3, 3)`` rotations by ``phis (n,)`` radians about the local normal (the frame's z)."""
+    phis = np.asarray(phis, dtype=np.float64)
+    c, s = np.cos(phis), np.sin(phis)
+    R = np.zeros((len(phis), 3, 3))
+    R[:, 0, 0], R[:, 0, 1], R[:, 1, 0], R[:, 1, 1], R[:, 2, 2] = c, -s, s, c, 1.0
+    return R

@@ -218,10 +218,14 @@ class MeshModel(SurfaceModel):
         return float(np.linalg.norm(np.ptp(self.vertices, axis=0)))
 
     @cached_property
-    def mean_edge(self) -> float:
+    def edge_lengths(self) -> np.ndarray:
+        """``(F, 3)`` lengths of each face's edges (shared edges counted once per face)."""
         f = self.faces
-        e = self.vertices[f] - self.vertices[np.roll(f, 1, axis=1)]
-        return float(np.mean(np.linalg.norm(e, axis=-1)))
+        return np.linalg.norm(self.vertices[f] - self.vertices[np.roll(f, 1, axis=1)], axis=-1)
+
+    @cached_property
+    def mean_edge(self) -> float:
+        return float(np.mean(self.edge_lengths))
 
     # ------------------------------------------------------------------ table
     def sample_vertices(self, *, theta: float = np.pi / 8, max_ring: int = 6, min_ring: int = 2,
@@ -535,10 +539,7 @@ def paraboloid_curvatures(center: np.ndarray, normal: np.ndarray, neighbours: np
     and ``k2`` separately.
     """
     n = normal / np.linalg.norm(normal)
-    helper = np.eye(3)[int(np.argmin(np.abs(n)))]
-    t1 = helper - (helper @ n) * n
-    t1 /= np.linalg.norm(t1)
-    t2 = np.cross(n, t1)
+    (t1,), (t2,) = _tangents(n[None])
     rel = neighbours - center
     order = np.argsort(np.linalg.norm(rel, axis=1))
     local = rel[order] @ np.stack([t1, t2, n]).T
