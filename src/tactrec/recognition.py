@@ -17,7 +17,7 @@ import numpy as np
 
 from .estimation import LocalGeometry, estimate
 from .io.touch import TactileData
-from .registration import DEFAULT_METHOD, Registration, get_registrar
+from .registration import DEFAULT_METHOD, Registration, get_polisher, get_registrar
 from .tables import CurvatureTable
 from .units import conversion
 
@@ -104,9 +104,30 @@ def register_on_model(entry: ModelEntry, data: TactileData, geom: LocalGeometry,
     return dataclasses.replace(best, candidates=total)
 
 
+def _rank_key(r: Registration):
+    """Accepted models first, by error in the data's units (models may differ in units)."""
+    return (not r.ok, r.error / r.scale if r.ok else 0.0, r.model)
+
+
+def _polished(ranking: list[Registration], models: list[ModelEntry], data: TactileData, geom: LocalGeometry,
+              method: str, count: int) -> list[Registration]:
+    """``ranking`` with its best ``count`` registrations refined further by ``method``'s polisher."""
+    by_name = {entry.name: entry for entry in models}
+    out = list(ranking)
+    for i, r in enumerate(ranking[:count]):
+        entry = by_name.get(r.model)
+        polisher = get_polisher(method, entry.model.kind) if entry is not None and r.ok else None
+        if polisher is None:
+            continue
+        g = _scaled(geom if r.normal_sign == 1 else geom.flipped(), r.scale)
+        better = polisher(entry.model, r, g, data.points * r.scale)
+        out[i] = dataclasses.replace(better, normal_sign=r.normal_sign, scale=r.scale)
+    return out
+
+
 def recognize(data: TactileData, models: Iterable[ModelEntry], *, method: str = DEFAULT_METHOD,
               window: int | str | None = "auto", degree: int = 3, curvature_method: str = "auto",
-              **options) -> Recognition:
+              polish: int = 3, **options) -> Recognition:
     """Recognise a touch against ``models`` (Section 3.3).
 
     Parameters
@@ -118,12 +139,26 @@ def recognize(data: TactileData, models: Iterable[ModelEntry], *, method: str = 
         Registration method (``"paper"``).
     window, degree, curvature_method
         Passed to :func:`tactrec.estimation.estimate`.
+    polish : int
+        How many of the best models get the method's final refinement (if it
+        has one: ``fast``).
     **options
-        Passed to the registration (e.g. ``delta``).
+        Passed to the registration (e.g. ``delta``).  Each model after the
+        first also gets ``bound``, the best error so far, which ``fast`` uses
+        to skip hopeless models early.
     """
     start = time.perf_counter()
     geom = estimate(data, window=window, degree=degree, method=curvature_method)
-    ranking = [register_on_model(entry, data, geom, method=method, **options) for entry in models]
-    ranking.sort(key=lambda r: (not r.ok, r.error if r.ok else 0.0, r.model))
+    models = list(models)
+    ranking, bound = [], np.inf          # bound: the best error so far, in the data's units
+    for entry in models:
+        scale = conversion(data.units, getattr(entry.model, "units", None))
+        r = register_on_model(entry, data, geom, method=method, bound=bound * scale, **options)
+        ranking.append(r)
+        if r.ok:
+            bound = min(bound, r.error / r.scale)
+    ranking.sort(key=_rank_key)
+    ranking = _polished(ranking, models, data, geom, method, polish)
+    ranking.sort(key=_rank_key)
     best = ranking[0].model if ranking and ranking[0].ok else None
     return Recognition(best, ranking, geom, time.perf_counter() - start, method)

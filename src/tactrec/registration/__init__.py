@@ -3,6 +3,12 @@
 :data:`METHODS` maps a method name and a model kind to a registration
 function ``register(model, table, geometry, points, **options) ->
 Registration``.  A new method or model kind adds its module and one line here.
+
+``paper`` is the paper's method (lookup within ``delta``, steepest descent,
+greedy mesh walk); ``fast`` (the default) ranks candidates instead of
+cutting them, and refines poses in six degrees of freedom.  A method may
+also offer ``polish(model, registration, geometry, points)``, which
+:func:`tactrec.recognition.recognize` applies to the best few models.
 """
 
 from __future__ import annotations
@@ -10,21 +16,28 @@ from __future__ import annotations
 from typing import Callable
 
 from ..errors import InputError
-from . import closedform_paper, mesh_paper
+from . import closedform_fast, closedform_paper, mesh_fast, mesh_paper
 from .result import Registration, local_frame
 
-__all__ = ["METHODS", "DEFAULT_METHOD", "Registration", "local_frame", "get_registrar", "method_defaults"]
+__all__ = ["METHODS", "DEFAULT_METHOD", "Registration", "local_frame", "get_registrar", "get_polisher", "method_defaults"]
 
 METHODS: dict[str, dict[str, Callable[..., Registration]]] = {
     "paper": {"closed-form": closedform_paper.register, "mesh": mesh_paper.register},
+    "fast": {"closed-form": closedform_fast.register, "mesh": mesh_fast.register},
+}
+
+#: per method and model kind, the optional refinement of a finished registration
+POLISHERS: dict[str, dict[str, Callable[..., Registration]]] = {
+    "fast": {"closed-form": closedform_fast.polish, "mesh": mesh_fast.polish},
 }
 
 #: per method and model kind, the default options (e.g. the lookup tolerance)
 DEFAULTS: dict[str, dict[str, dict]] = {
     "paper": {"closed-form": closedform_paper.DEFAULTS, "mesh": mesh_paper.DEFAULTS},
+    "fast": {"closed-form": closedform_fast.DEFAULTS, "mesh": mesh_fast.DEFAULTS},
 }
 
-DEFAULT_METHOD = "paper"
+DEFAULT_METHOD = "fast"
 
 
 def get_registrar(method: str, kind: str) -> Callable[..., Registration]:
@@ -36,6 +49,11 @@ def get_registrar(method: str, kind: str) -> Callable[..., Registration]:
         raise InputError(f"method {method!r} cannot register onto {kind} models yet "
                          f"(it handles: {', '.join(by_kind)})", "--method")
     return by_kind[kind]
+
+
+def get_polisher(method: str, kind: str) -> Callable[..., Registration] | None:
+    """``method``'s refinement of a finished registration on ``kind`` models, if it has one."""
+    return POLISHERS.get(method, {}).get(kind)
 
 
 def method_defaults(method: str, kind: str) -> dict:

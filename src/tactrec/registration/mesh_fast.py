@@ -1,25 +1,32 @@
 """Fast registration onto a triangle mesh (method ``fast``).
 
-Where the paper (Section 5.3) walks from a few sampled vertices, sectioning
-the mesh for every vertex and every 10-degree rotation, this method
+Where the paper (Section 5.3) cuts the lookup at a hard ``delta`` and walks
+from the survivors, sectioning the mesh for every vertex and every 10-degree
+rotation, this method
 
-1. ranks *every* vertex by how close its fitted curvatures (eq. 14, one
-   vectorised fit per vertex: :meth:`MeshModel.curvature_field`) are to the
-   estimate, instead of cutting at a hard ``delta``, and keeps the best
-   ``candidates`` of them, at most one per cell of a grid one data radius
-   across divided by ``spread``;
-2. poses the data at each candidate from the two frames alone: the data
-   normal onto the vertex normal and the data's first principal direction
-   onto the vertex's, either way round (at umbilic points, where the
-   direction means nothing, a 30-degree scan instead);
-3. scores every pose at once by the exact mean distance of a subset of the
-   data points to the mesh (libigl's AABB tree), and
-4. refines the best poses in all six degrees of freedom by point-to-plane
-   Gauss-Newton (ICP) on all data points, reporting the exact mean distance
-   (eq. 12's error, with true distances instead of eq. 15's sections).
+1. ranks *every* vertex by how close its principal curvatures (one weighted
+   paraboloid fit, eq. 14, per vertex: :meth:`MeshModel.curvature_field`) are
+   to the data's, both fitted at the same scale (three mean edges), and keeps
+   the best ``candidates``, at most one per cell of a grid a quarter of the
+   touch's radius across, so the candidates are distinct places;
+2. poses the data at each candidate from the frames alone: the data normal
+   onto the vertex normal and the data's first principal direction onto the
+   vertex's, either way round; where either point is (nearly) umbilic and the
+   direction means nothing, every 30 degrees about the normal instead;
+3. improves every pose by a few Gauss-Newton steps against the tangent plane
+   of the nearest vertex (a k-d tree query: the cheap stand-in for the
+   distance to the mesh), keeps each candidate's best rotation and the best
+   ``refine`` candidates;
+4. refines those in all six degrees of freedom by point-to-plane
+   Gauss-Newton on the exact closest points (libigl's AABB tree), and the
+   best ``final`` again on all data points.
 
-``bound`` (the best error found so far on other models) skips refining
-poses that cannot beat it.
+The error is eq. 12's mean distance of the data points to the model, with
+exact point-to-mesh distances instead of eq. 15's sections.  ``bound`` (the
+best error found so far on other models) skips the refinement of a model
+whose cheap scores cannot come near it.  :func:`polish` continues the
+refinement of a registration: :func:`tactrec.recognition.recognize` calls it
+on the best few models only.
 """
 
 from __future__ import annotations
@@ -29,30 +36,40 @@ import numpy as np
 from ..estimation import LocalGeometry
 from ..surfaces.mesh import MeshModel, quadric_curvatures
 from ..tables import CurvatureTable
-from .result import Registration, local_frame
+from .result import Registration, local_frame, rotations_z
 
-__all__ = ["register", "DEFAULTS", "curvature_field"]
+__all__ = ["register", "polish", "refine", "DEFAULTS", "curvature_field"]
 
 DEFAULTS = {
-    "candidates": 600,      # vertices kept after ranking by curvature
-    "spread": 4.0,          # at most one candidate per cell of (data radius / spread)
-    "coarse_points": 8,     # data points per curve in the coarse score
-    "refine": 16,           # poses refined per model
-    "iterations": 10,       # Gauss-Newton steps per refined pose, on vertex planes
-    "final": 3,             # poses refined again on the exact surface with all points
-    "final_iterations": 4,
-    "umbilic": 0.004,       # |k1 - k2| below this (1/model units): scan the rotation instead
+    "candidates": 150,      # distinct places kept after ranking every vertex by curvature
+    "spread": 4.0,          # at most one candidate per cell of (touch radius / spread)
+    "coarse_points": 8,     # data points per curve in the cheap stages
+    "coarse_iterations": 4,  # Gauss-Newton steps on vertex planes, every pose
+    "refine": 16,           # candidates refined on the exact surface
+    "iterations": 10,
+    "final": 3,             # poses refined again with all data points
+    "final_iterations": 10,
+    "umbilic": 0.05,        # |k1 - k2| x touch radius below this: scan the rotation instead
+    "prune": 4.0,           # skip a model whose best cheap score exceeds prune x bound
 }
 
 
-def curvature_field(model: MeshModel):
-    """``k1, k2, d1`` of every vertex, computed once per model."""
-    field = model.__dict__.get("_curvature_field")
+def curvature_field(model: MeshModel) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """``k1, k2 (V,), d1 (V, 3)`` of every vertex and the fit radius, computed once per model."""
+    field = model.__dict__.get("_fast_curvature_field")
     if field is None:
-        model.__dict__["_curvature_radius"] = 3.0 * model.mean_edge
-        field = model.curvature_field(radius=model.__dict__["_curvature_radius"])
-        model.__dict__["_curvature_field"] = field
+        radius = 3.0 * model.mean_edge
+        field = model.__dict__["_fast_curvature_field"] = (*model.curvature_field(radius=radius), radius)
     return field
+
+
+def _vertex_tree(model: MeshModel):
+    tree = model.__dict__.get("_fast_vertex_tree")
+    if tree is None:
+        from scipy.spatial import cKDTree
+
+        tree = model.__dict__["_fast_vertex_tree"] = cKDTree(model.vertices)
+    return tree
 
 
 def _rotations(axis_angle: np.ndarray) -> np.ndarray:
@@ -66,47 +83,39 @@ def _rotations(axis_angle: np.ndarray) -> np.ndarray:
     return np.eye(3) + s * K + (1 - c) * (K @ K)
 
 
+def _moved(R: np.ndarray, t: np.ndarray, x: np.ndarray) -> np.ndarray:
+    return np.einsum("hij,mj->hmi", R, x) + t[:, None, :]
+
+
 def _mean_distance(model: MeshModel, R: np.ndarray, t: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """Mean distance to the mesh of ``x (m, 3)`` under each pose ``R (h, 3, 3), t (h, 3)``."""
-    moved = np.einsum("hij,mj->hmi", R, x) + t[:, None, :]
-    return model.distance(moved.reshape(-1, 3)).reshape(len(R), -1).mean(axis=1)
+    """Exact mean distance to the mesh of ``x (m, 3)`` under each pose ``R (h, 3, 3), t (h, 3)``."""
+    return model.distance(_moved(R, t, x).reshape(-1, 3)).reshape(len(R), -1).mean(axis=1)
 
 
-def _vertex_tree(model: MeshModel):
-    tree = model.__dict__.get("_vertex_tree")
-    if tree is None:
-        from scipy.spatial import cKDTree
-
-        tree = model.__dict__["_vertex_tree"] = cKDTree(model.vertices)
-    return tree
-
-
-def _plane_distance(model: MeshModel, moved: np.ndarray):
-    """Distance of ``moved (..., 3)`` to the tangent plane of its nearest vertex:
-    a cheap stand-in for the distance to the mesh.  Returns it and the vertices."""
+def _nearest_planes(model: MeshModel, moved: np.ndarray):
+    """The nearest vertex's position and normal for every point of ``moved (..., 3)``."""
     _, v = _vertex_tree(model).query(moved.reshape(-1, 3))
     v = v.reshape(moved.shape[:-1])
-    return np.abs(np.sum((moved - model.vertices[v]) * model.vertex_normals[v], axis=-1)), v
+    return model.vertices[v], model.vertex_normals[v]
 
 
 def refine(model: MeshModel, R: np.ndarray, t: np.ndarray, x: np.ndarray, *, iterations: int,
-           exact: bool = True):
-    """Point-to-plane Gauss-Newton on the poses ``R (h, 3, 3), t (h, 3)`` of the data ``x (m, 3)``:
-    against the nearest vertex's tangent plane, or (``exact``) the closest point's face.
+           exact: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Point-to-plane Gauss-Newton (damped) on poses ``R (h, 3, 3), t (h, 3)`` of data ``x (m, 3)``.
 
-    Returns the refined poses and their exact mean distances ``(h,)``.
+    Each step linearises ``r_i = (R x_i + t - c_i) . n_i`` about the current
+    pose, with ``c_i, n_i`` the closest point on the mesh and its face normal
+    (``exact``) or the nearest vertex and its normal.  Returns the poses and
+    their mean distances ``(h,)`` (exact or to those planes).
     """
-    normals = model.face_normals
     R, t = R.copy(), t.copy()
     for _ in range(iterations):
-        moved = np.einsum("hij,mj->hmi", R, x) + t[:, None, :]                     # (h, m, 3)
+        moved = _moved(R, t, x)                                                      # (h, m, 3)
         if exact:
             _, face, closest = model.closest_points(moved.reshape(-1, 3))
-            n = normals[face].reshape(moved.shape)
-            closest = closest.reshape(moved.shape)
+            n, closest = model.face_normals[face].reshape(moved.shape), closest.reshape(moved.shape)
         else:
-            _, v = _plane_distance(model, moved)
-            n, closest = model.vertex_normals[v], model.vertices[v]
+            closest, n = _nearest_planes(model, moved)
         r = np.sum((moved - closest) * n, axis=2)                                   # (h, m)
         J = np.concatenate([np.cross(moved, n), n], axis=2)                         # (h, m, 6)
         JtJ = np.einsum("hmi,hmj->hij", J, J)
@@ -116,89 +125,97 @@ def refine(model: MeshModel, R: np.ndarray, t: np.ndarray, x: np.ndarray, *, ite
         dR = _rotations(step[:, :3])
         R = dR @ R
         t = np.einsum("hij,hj->hi", dR, t) + step[:, 3:]
-        if np.max(np.abs(step)) < 1e-9:
+        if np.max(np.abs(step)) < 1e-10 * max(1.0, model.size):
             break
     if exact:
         return R, t, _mean_distance(model, R, t, x)
-    moved = np.einsum("hij,mj->hmi", R, x) + t[:, None, :]
-    return R, t, _plane_distance(model, moved)[0].mean(axis=1)
+    moved = _moved(R, t, x)
+    closest, n = _nearest_planes(model, moved)
+    return R, t, np.abs(np.sum((moved - closest) * n, axis=2)).mean(axis=1)
+
+
+def _subset(curves, per_curve: int) -> np.ndarray:
+    return np.concatenate([np.asarray(c, dtype=np.float64)[np.linspace(0, len(c) - 1, per_curve).round().astype(int)]
+                           for c in curves])
+
+
+def _data_curvatures(model: MeshModel, geometry: LocalGeometry, x: np.ndarray, radius: float):
+    """The data's principal curvatures and first direction, fitted like the model's (within ``radius``)."""
+    L0 = local_frame(geometry.normal, geometry.directions[0])
+    local = (x - geometry.contact) @ L0.T
+    r = np.linalg.norm(local[:, :2], axis=1)
+    near = r <= radius
+    if near.sum() < 12:
+        near = np.argsort(r)[:12]
+    k1, k2, (u, v) = quadric_curvatures(local[near][None], np.ones((1, len(local[near]))))
+    return float(k1[0]), float(k2[0]), u[0] * L0[0] + v[0] * L0[1]
+
+
+def _result(model: MeshModel, geometry: LocalGeometry, R, t, error, candidates: int) -> Registration:
+    _, face, location = model.closest_points((R @ geometry.contact + t)[None])
+    return Registration(model=model.name, error=float(error), location=location[0], rotation=R, translation=t,
+                        candidates=candidates, site=np.array([float(face[0])]), phi=None)
 
 
 def register(model: MeshModel, table: CurvatureTable, geometry: LocalGeometry, points: np.ndarray, *,
              curves=None, bound: float = np.inf, candidates: int = DEFAULTS["candidates"],
              spread: float = DEFAULTS["spread"], coarse_points: int = DEFAULTS["coarse_points"],
-             refine_poses: int = DEFAULTS["refine"], iterations: int = DEFAULTS["iterations"],
-             umbilic: float = DEFAULTS["umbilic"], final: int = DEFAULTS["final"],
-             final_iterations: int = DEFAULTS["final_iterations"], coarse_exact: bool = False,
-             coarse_iterations: int = 0,
-             exact_refine: bool = False, **_ignored) -> Registration:
-    """Register the data onto ``model``: candidates by curvature rank, poses
-    from the principal frames, coarse exact scores, six-DoF refinement."""
+             coarse_iterations: int = DEFAULTS["coarse_iterations"], refine_poses: int = DEFAULTS["refine"],
+             iterations: int = DEFAULTS["iterations"], final: int = DEFAULTS["final"],
+             final_iterations: int = DEFAULTS["final_iterations"], umbilic: float = DEFAULTS["umbilic"],
+             prune: float = DEFAULTS["prune"], **_ignored) -> Registration:
+    """Register the data curves onto ``model`` (steps 1-4 of the module text).
+
+    ``points (m, 3)`` are all data points and ``curves`` the same points curve
+    by curve, in model units; ``geometry`` the estimate (``table`` is not
+    used: the candidates come from the curvature of every vertex).
+    """
     if curves is None:
         raise ValueError("mesh registration needs the data curves")
-    k1, k2, d1 = curvature_field(model)
+    k1, k2, d1, fit_radius = curvature_field(model)
     x = np.asarray(points, dtype=np.float64)
     radius = float(np.max(np.linalg.norm(x - geometry.contact, axis=1)))
     if radius > model.size:
         return Registration.rejection(model.name, "the touch is larger than the model")
-    # 1. the data's curvatures at the scale of the mesh's own fits, every vertex ranked by them,
-    #    the best of each cell kept
-    L0 = local_frame(geometry.normal, geometry.directions[0])
-    local = (x - geometry.contact) @ L0.T
-    near = np.linalg.norm(local[:, :2], axis=1) <= model.__dict__["_curvature_radius"]
-    if near.sum() < 12:
-        near = np.argsort(np.linalg.norm(local[:, :2], axis=1))[:12]
-    dk1, dk2, (u, v) = quadric_curvatures(local[near][None], np.ones((1, len(local[near]))))
-    dk1, dk2 = float(dk1[0]), float(dk2[0])
-    direction = u[0] * L0[0] + v[0] * L0[1]
+    # 1. every vertex ranked by its curvature gap to the data, the best of each grid cell kept
+    dk1, dk2, direction = _data_curvatures(model, geometry, x, fit_radius)
     gap = np.hypot(k1 - dk1, k2 - dk2)
     order = np.argsort(gap, kind="stable")
     cell = np.floor((model.vertices[order] - model.vertices.min(axis=0)) / (radius / spread)).astype(np.int64)
-    _, first = np.unique((cell[:, 0] * (cell[:, 1].max() + 1) + cell[:, 1]) * (cell[:, 2].max() + 1) + cell[:, 2],
-                         return_index=True)
+    _, first = np.unique(cell, axis=0, return_index=True)
     chosen = order[np.sort(first)][:candidates]
-    # 2. poses from the frames: data (t1, t2, N) onto vertex (d1, n x d1, n), psi about the normal
-    L = local_frame(geometry.normal, direction)
+    # 2. poses from the frames: data (t1, t2, N) onto vertex (d1, n x d1, n), rotated psi about the normal
+    umbilic = umbilic / radius
     n = model.vertex_normals[chosen]
     F = np.stack([d1[chosen], np.cross(n, d1[chosen]), n], axis=2)                  # (c, 3, 3) columns
-    round_ = np.abs(k1[chosen] - k2[chosen]) < umbilic
-    if abs(dk1 - dk2) < umbilic:
-        round_[:] = True
-    psis = [np.array([0.0, np.pi]) if not r else np.deg2rad(np.arange(0.0, 360.0, 30.0)) for r in round_]
+    scan = (np.abs(k1[chosen] - k2[chosen]) < umbilic) | (abs(dk1 - dk2) < umbilic)
+    psis = [np.deg2rad(np.arange(0.0, 360.0, 30.0)) if s else np.array([0.0, np.pi]) for s in scan]
     owner = np.repeat(np.arange(len(chosen)), [len(p) for p in psis])
-    psi = np.concatenate(psis)
-    c, s = np.cos(psi), np.sin(psi)
-    Rz = np.zeros((len(psi), 3, 3))
-    Rz[:, 0, 0], Rz[:, 0, 1], Rz[:, 1, 0], Rz[:, 1, 1], Rz[:, 2, 2] = c, -s, s, c, 1.0
-    R = F[owner] @ Rz @ L
+    R = F[owner] @ rotations_z(np.concatenate(psis)) @ local_frame(geometry.normal, direction)
     t = model.vertices[chosen][owner] - np.einsum("hij,j->hi", R, geometry.contact)
-    # 3. coarse score on a subset of the points
-    subset = np.concatenate([np.asarray(cv, dtype=np.float64)[np.linspace(0, len(cv) - 1, coarse_points).round()
-                                                              .astype(int)] for cv in curves])
-    if coarse_exact:
-        coarse = _mean_distance(model, R, t, subset)
-    elif coarse_iterations:
-        R, t, coarse = refine(model, R, t, subset, iterations=coarse_iterations, exact=False)
-    else:
-        moved = np.einsum("hij,mj->hmi", R, subset) + t[:, None, :]
-        coarse = _plane_distance(model, moved)[0].mean(axis=1)
-    # the best rotation of each candidate, then the best candidates: distinct places, not one place
-    # under several rotations
-    order = np.lexsort((coarse, owner))
+    # 3. a few cheap Gauss-Newton steps for every pose; each candidate's best rotation, the best candidates
+    subset = _subset(curves, coarse_points)
+    R, t, cheap = refine(model, R, t, subset, iterations=coarse_iterations, exact=False)
+    order = np.lexsort((cheap, owner))
     per_candidate = order[np.r_[True, owner[order][1:] != owner[order][:-1]]]
-    keep = per_candidate[np.argsort(coarse[per_candidate])][:refine_poses]
-    keep = keep[coarse[keep] < 4.0 * bound + 1e-12] if np.isfinite(bound) else keep
-    if len(keep) == 0:
-        return Registration.rejection(model.name, f"pruned: coarse error {coarse.min():.3g} cannot beat "
-                                                  f"{bound:.3g}")
-    # 4. six-DoF refinement: on vertex planes with a few points per curve, then exact on all points
-    middle = np.concatenate([np.asarray(cv, dtype=np.float64)[np.linspace(0, len(cv) - 1, 3 * coarse_points)
-                                                              .round().astype(int)] for cv in curves])
-    R, t, error = refine(model, R[keep], t[keep], middle, iterations=iterations, exact=exact_refine)
+    keep = per_candidate[np.argsort(cheap[per_candidate])][:refine_poses]
+    if np.isfinite(bound):
+        keep = keep[cheap[keep] <= prune * bound]
+        if len(keep) == 0:
+            return Registration.rejection(model.name, f"pruned: no pose came near the best error {bound:.3g}")
+    # 4. six degrees of freedom on the exact surface, then all points for the best few
+    R, t, error = refine(model, R[keep], t[keep], _subset(curves, 3 * coarse_points), iterations=iterations)
     best = np.argsort(error)[:final]
     R, t, error = refine(model, R[best], t[best], x, iterations=final_iterations)
     b = int(np.argmin(error))
-    R, t = R[b], t[b]
-    _, face, location = model.closest_points((R @ geometry.contact + t)[None])
-    return Registration(model=model.name, error=float(error[b]), location=location[0], rotation=R,
-                        translation=t, candidates=len(chosen), site=np.array([float(face[0])]), phi=None)
+    return _result(model, geometry, R[b], t[b], error[b], len(chosen))
+
+
+def polish(model: MeshModel, registration: Registration, geometry: LocalGeometry, points: np.ndarray, *,
+           iterations: int = 30) -> Registration:
+    """Continue the Gauss-Newton refinement of ``registration`` on all points."""
+    R, t, error = refine(model, registration.rotation[None], registration.translation[None],
+                         np.asarray(points, dtype=np.float64), iterations=iterations)
+    if error[0] >= registration.error:
+        return registration
+    return _result(model, geometry, R[0], t[0], error[0], registration.candidates)

@@ -453,16 +453,20 @@ class ClosedFormSurface(SurfaceModel):
             raise ValueError(f"the parametrisation is singular at (u, v) = ({u:.6g}, {v:.6g})")
         return SiteFrame(np.array([u, v]), jet.point, jet.frame[:, 0], jet.frame[:, 1], jet.frame[:, 2])
 
-    def locate(self, point) -> np.ndarray:
-        """(u, v) of the surface point nearest to ``point``: grid search, then Gauss-Newton."""
+    def locate(self, point, *, start=None) -> np.ndarray:
+        """(u, v) of the surface point nearest to ``point``: grid search (or from
+        ``start``, a nearby ``(u, v)``), then Gauss-Newton."""
         point = np.asarray(point, dtype=np.float64)
-        nu, nv = 200, 200
-        uu, vv = np.meshgrid(self.domain_u.grid(nu), self.domain_v.grid(nv), indexing="ij")
-        grid = np.stack([uu.ravel(), vv.ravel()], axis=-1)
-        pts = self.evaluate(grid[:, 0], grid[:, 1])
-        d2 = np.sum((pts - point) ** 2, axis=1)
-        d2[~np.isfinite(d2)] = np.inf
-        uv = grid[int(np.argmin(d2))]
+        if start is None:
+            nu, nv = 200, 200
+            uu, vv = np.meshgrid(self.domain_u.grid(nu), self.domain_v.grid(nv), indexing="ij")
+            grid = np.stack([uu.ravel(), vv.ravel()], axis=-1)
+            pts = self.evaluate(grid[:, 0], grid[:, 1])
+            d2 = np.sum((pts - point) ** 2, axis=1)
+            d2[~np.isfinite(d2)] = np.inf
+            uv = grid[int(np.argmin(d2))]
+        else:
+            uv = self.wrap(np.asarray(start, dtype=np.float64)[:2])
         for _ in range(30):
             s, su, sv, *_ = self._derivatives(uv[0], uv[1])
             J = np.stack([su, sv], axis=-1)

@@ -300,7 +300,8 @@ class MeshModel(SurfaceModel):
         local = np.einsum("vkj,vji->vki", self.vertices[idx] - self.vertices[:, None, :], frames)
         agree = np.einsum("vkj,vj->vk", self.vertex_normals[idx], self.vertex_normals) > 0.5
         weight = (agree & ((dist <= radius) | (np.arange(count) < 12))).astype(float)
-        k1, k2, (u, v) = quadric_curvatures(local, weight)
+        k1, k2, (u, v), rms = quadric_curvatures(local, weight, residual=True)
+        self.__dict__["_fit_residual"] = rms
         t1, t2, n = frames[:, :, 0], frames[:, :, 1], frames[:, :, 2]
         d1 = u[:, None] * t1 + v[:, None] * t2 + 0.0 * n
         return k1, k2, _unit_rows(d1)
@@ -491,7 +492,7 @@ def clean_mesh(vertices: np.ndarray, faces: np.ndarray):
     return vertices, faces, report
 
 
-def quadric_curvatures(local: np.ndarray, weight: np.ndarray):
+def quadric_curvatures(local: np.ndarray, weight: np.ndarray, *, residual: bool = False):
     """Principal curvatures at the origin of ``z = a x^2 + b xy + c y^2 + d x + e y + f``
     fitted (weighted least squares) to points ``local (n, k, 3)`` given in
     frames ``(t1, t2, N)``, ``n`` fits at once; ``weight (n, k)``.
@@ -524,6 +525,10 @@ def quadric_curvatures(local: np.ndarray, weight: np.ndarray):
     v = np.where(np.sum(r1 * r1, axis=0) >= np.sum(r2 * r2, axis=0), r1, r2)
     norm = np.hypot(v[0], v[1])
     v = np.where(norm > 1e-300, v / np.where(norm > 1e-300, norm, 1.0), np.array([[1.0], [0.0]]) * np.ones_like(norm))
+    if residual:
+        rms = np.sqrt(np.sum(weight * (np.einsum("vki,vi->vk", A, coef) - z) ** 2, axis=-1)
+                      / np.maximum(np.sum(weight, axis=-1), 1e-300))
+        return k1, k2, v, rms
     return k1, k2, v
 
 
