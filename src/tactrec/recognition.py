@@ -114,13 +114,15 @@ def _polished(ranking: list[Registration], models: list[ModelEntry], data: Tacti
     """``ranking`` with its best ``count`` registrations refined further by ``method``'s polisher."""
     by_name = {entry.name: entry for entry in models}
     out = list(ranking)
+    best = ranking[0].error / ranking[0].scale if ranking and ranking[0].ok else np.inf
     for i, r in enumerate(ranking[:count]):
         entry = by_name.get(r.model)
         polisher = get_polisher(method, entry.model.kind) if entry is not None and r.ok else None
         if polisher is None:
             continue
         g = _scaled(geom if r.normal_sign == 1 else geom.flipped(), r.scale)
-        better = polisher(entry.model, r, g, data.points * r.scale)
+        better = polisher(entry.model, r, g, data.points * r.scale, curves=[c * r.scale for c in data.curves],
+                          table=entry.table, best=best * r.scale)
         out[i] = dataclasses.replace(better, normal_sign=r.normal_sign, scale=r.scale)
     return out
 

@@ -75,9 +75,14 @@ def refine(model: ClosedFormSurface, R: np.ndarray, t: np.ndarray, x: np.ndarray
     return R, t, np.where(np.isfinite(error), error, np.inf)
 
 
-def _result(model, geometry, R, t, error, start, candidates) -> Registration:
-    uv = model.locate(R @ geometry.contact + t, start=start)
+def _result(model, geometry, R, t, error, start, candidates) -> Registration | None:
+    """The registration, or ``None`` if the contact has left the declared patch (the implicit
+    surface of eq. 11 goes on beyond it)."""
+    p = R @ geometry.contact + t
+    uv = model.locate(p, start=start)
     jet = model.frame_jet(uv[0:1], uv[1:2])
+    if not np.linalg.norm(jet.point[0] - p) <= 3.0 * error + 1e-9 * model.size:
+        return None
     return Registration(model=model.name, error=float(error), location=jet.point[0], rotation=R, translation=t,
                         candidates=candidates, site=uv, phi=None)
 
@@ -91,6 +96,8 @@ def register(model: ClosedFormSurface, table: CurvatureTable, geometry: LocalGeo
     if len(idx) == 0:
         return Registration.rejection(model.name, "empty table")
     x = np.asarray(points, dtype=np.float64)
+    if np.max(np.linalg.norm(x - geometry.contact, axis=1)) > model.size:
+        return Registration.rejection(model.name, "the touch is larger than the model")
     L = local_frame(geometry.normal, geometry.directions[0])
     problem = Superposition(model, (x - geometry.contact) @ L.T)
     uv0 = table.samples.sites[idx]
@@ -103,17 +110,21 @@ def register(model: ClosedFormSurface, table: CurvatureTable, geometry: LocalGeo
     R = jet.frame[usable] @ rotations_z(phi0) @ L
     t = jet.point[usable] - np.einsum("hij,j->hi", R, geometry.contact)
     R, t, error = refine(model, R, t, x, iterations=iterations)
-    b = int(np.argmin(error))
-    if not np.isfinite(error[b]):
-        return Registration.rejection(model.name, "registration failed")
-    return _result(model, geometry, R[b], t[b], error[b], uv0[b], len(idx))
+    for b in np.argsort(error)[:5]:
+        if not np.isfinite(error[b]):
+            break
+        found = _result(model, geometry, R[b], t[b], error[b], uv0[b], len(idx))
+        if found is not None:
+            return found
+    return Registration.rejection(model.name, "registration failed")
 
 
 def polish(model: ClosedFormSurface, registration: Registration, geometry: LocalGeometry, points: np.ndarray, *,
-           iterations: int = 20) -> Registration:
+           iterations: int = 20, **_ignored) -> Registration:
     """Continue the Gauss-Newton refinement of ``registration``."""
     R, t, error = refine(model, registration.rotation[None], registration.translation[None],
                          np.asarray(points, dtype=np.float64), iterations=iterations)
     if not error[0] < registration.error:
         return registration
-    return _result(model, geometry, R[0], t[0], error[0], registration.site, registration.candidates)
+    found = _result(model, geometry, R[0], t[0], error[0], registration.site, registration.candidates)
+    return registration if found is None else found

@@ -51,6 +51,7 @@ DEFAULTS = {
     "final_iterations": 10,
     "umbilic": 0.05,        # |k1 - k2| x touch radius below this: scan the rotation instead
     "prune": 4.0,           # skip a model whose best cheap score exceeds prune x bound
+    "hard": 0.01,           # polish: search again when the error exceeds this x touch radius
 }
 
 
@@ -163,7 +164,7 @@ def register(model: MeshModel, table: CurvatureTable, geometry: LocalGeometry, p
              coarse_iterations: int = DEFAULTS["coarse_iterations"], refine_poses: int = DEFAULTS["refine"],
              iterations: int = DEFAULTS["iterations"], final: int = DEFAULTS["final"],
              final_iterations: int = DEFAULTS["final_iterations"], umbilic: float = DEFAULTS["umbilic"],
-             prune: float = DEFAULTS["prune"], **_ignored) -> Registration:
+             prune: float = DEFAULTS["prune"], tilt: float = 0.0, **_ignored) -> Registration:
     """Register the data curves onto ``model`` (steps 1-4 of the module text).
 
     ``points (m, 3)`` are all data points and ``curves`` the same points curve
@@ -191,7 +192,14 @@ def register(model: MeshModel, table: CurvatureTable, geometry: LocalGeometry, p
     scan = (np.abs(k1[chosen] - k2[chosen]) < umbilic) | (abs(dk1 - dk2) < umbilic)
     psis = [np.deg2rad(np.arange(0.0, 360.0, 30.0)) if s else np.array([0.0, np.pi]) for s in scan]
     owner = np.repeat(np.arange(len(chosen)), [len(p) for p in psis])
-    R = F[owner] @ rotations_z(np.concatenate(psis)) @ local_frame(geometry.normal, direction)
+    L = local_frame(geometry.normal, direction)
+    R = F[owner] @ rotations_z(np.concatenate(psis))
+    if tilt > 0:
+        a = np.deg2rad(tilt)
+        T = _rotations(np.array([[0, 0, 0], [a, 0, 0], [-a, 0, 0], [0, a, 0], [0, -a, 0]], dtype=float))
+        R = (R[:, None] @ T[None]).reshape(-1, 3, 3)
+        owner = np.repeat(owner, len(T))
+    R = R @ L
     t = model.vertices[chosen][owner] - np.einsum("hij,j->hi", R, geometry.contact)
     # 3. a few cheap Gauss-Newton steps for every pose; each candidate's best rotation, the best candidates
     subset = _subset(curves, coarse_points)
@@ -212,10 +220,23 @@ def register(model: MeshModel, table: CurvatureTable, geometry: LocalGeometry, p
 
 
 def polish(model: MeshModel, registration: Registration, geometry: LocalGeometry, points: np.ndarray, *,
-           iterations: int = 30) -> Registration:
-    """Continue the Gauss-Newton refinement of ``registration`` on all points."""
-    R, t, error = refine(model, registration.rotation[None], registration.translation[None],
-                         np.asarray(points, dtype=np.float64), iterations=iterations)
-    if error[0] >= registration.error:
-        return registration
-    return _result(model, geometry, R[0], t[0], error[0], registration.candidates)
+           curves=None, table: CurvatureTable | None = None, best: float = 0.0, iterations: int = 30,
+           hard: float = DEFAULTS["hard"]) -> Registration:
+    """Refine ``registration`` further on all points.  If neither it nor the best
+    registration on any model (error ``best``) fits better than ``hard`` x the
+    touch's radius (a touch across a crease, where the estimated normal can be tens of degrees
+    off), search again more widely: every 30 degrees about the normal at every candidate, with
+    the normal tilted 15 degrees four ways, twice as many poses refined."""
+    x = np.asarray(points, dtype=np.float64)
+    R, t, error = refine(model, registration.rotation[None], registration.translation[None], x,
+                         iterations=iterations)
+    out = registration
+    if error[0] < registration.error:
+        out = _result(model, geometry, R[0], t[0], error[0], registration.candidates)
+    radius = float(np.max(np.linalg.norm(x - geometry.contact, axis=1)))
+    if curves is not None and table is not None and min(best, registration.error) > hard * radius:
+        wide = register(model, table, geometry, x, curves=curves, umbilic=np.inf, tilt=15.0,
+                        refine_poses=2 * DEFAULTS["refine"])
+        if wide.ok and wide.error < out.error:
+            out = wide
+    return out
