@@ -38,7 +38,7 @@ from ..surfaces.mesh import MeshModel, quadric_curvatures
 from ..tables import CurvatureTable
 from .result import Registration, local_frame, rotations_z
 
-__all__ = ["register", "polish", "refine", "DEFAULTS", "curvature_field"]
+__all__ = ["register", "polish", "refine", "prepare", "DEFAULTS", "curvature_field"]
 
 DEFAULTS = {
     "candidates": 150,      # distinct places kept after ranking every vertex by curvature
@@ -62,6 +62,13 @@ def curvature_field(model: MeshModel) -> tuple[np.ndarray, np.ndarray, np.ndarra
         radius = 3.0 * model.mean_edge
         field = model.__dict__["_fast_curvature_field"] = (*model.curvature_field(radius=radius), radius)
     return field
+
+
+def prepare(model: MeshModel) -> None:
+    """Build what registration needs once per model (curvature field, k-d tree, AABB tree)."""
+    curvature_field(model)
+    _vertex_tree(model)
+    model.distance(model.vertices[:1])
 
 
 def _vertex_tree(model: MeshModel):

@@ -1,0 +1,228 @@
+"""``fast`` against ``paper`` on the same touches, in one run.
+
+Two protocols on the ten YCB scans of Fig. 11 (millimetres), ``instances``
+touches per scan each, every touch recognised by both methods against all ten:
+
+``p3``
+    The paper's P3 at its defaults: the contact at a vertex (no two within 15
+    rings), three curves 24 mm long, planes 60 degrees apart, points every
+    0.3 mm, no noise, the outward side known.
+``hard``
+    The contact anywhere on a face (random face, random barycentric point),
+    curves 12 mm long, planes 30 degrees apart, Gaussian noise of sigma
+    0.05 mm on every coordinate, the outward side unknown.
+
+Both get a random rigid motion (the sensor frame).  For each protocol and
+method the JSON has the success rate, median and mean seconds per
+recognition, and the median distance from the reported contact to the true
+one; the speed-up is the ratio of the medians.  Records are saved per touch,
+so an interrupted run resumes.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from ..database import build_entries
+from ..errors import InputError
+from ..recognition import recognize
+from ..registration import mesh_fast
+from ..simulation import simulate_touch, spread_vertices
+from ..surfaces import BUILTIN_SETS
+from .common import default_jobs, instance_rng, run_parallel, write_json
+
+__all__ = ["run", "PROTOCOLS", "METHODS"]
+
+SPACING = 0.3
+PROTOCOLS = {
+    "p3": {"length": 24.0, "angle": 60.0, "noise": 0.0, "outward": True, "site": "vertex"},
+    "hard": {"length": 12.0, "angle": 30.0, "noise": 0.05, "outward": False, "site": "face"},
+}
+METHODS = ("fast", "paper")
+#: the paper's P3 at its defaults (Fig. 11)
+PAPER = {"success_percent": 93, "seconds": 115}
+
+_DB = {}
+
+
+def _database(models: tuple[str, ...]):
+    if models not in _DB:
+        db = build_entries(models)
+        for entry in db.entries:                 # one-off per model, not charged to a recognition
+            mesh_fast.prepare(entry.model)
+        _DB[models] = db
+    return _DB[models]
+
+
+def _simulate(entry, m_index: int, instance: int, seed: int, protocol: str):
+    spec = PROTOCOLS[protocol]
+    rng = instance_rng(seed, m_index, instance, 1 if protocol == "hard" else 0)
+    points = int(round(spec["length"] / SPACING)) + 1
+    options = dict(points=points, spacing=SPACING, angle=spec["angle"], noise=spec["noise"], noise_kind="gaussian",
+                   outward=spec["outward"])
+    model = entry.model
+    if spec["site"] == "vertex":
+        vertices = spread_vertices(model, instance + 1, rings=15, rng=instance_rng(seed, m_index))
+        site = [int(vertices[min(instance, len(vertices) - 1)])]
+        return site, simulate_touch(model, site, rng=rng, **options)
+    for _ in range(50):                           # a face whose sections reach the curves' length
+        face = int(rng.integers(len(model.faces)))
+        b = rng.dirichlet(np.ones(3))
+        site = [face, float(b[1]), float(b[2])]
+        try:
+            return site, simulate_touch(model, site, rng=rng, **options)
+        except ValueError:
+            continue
+    raise RuntimeError(f"no face of {model.name} takes a {spec['length']} mm touch")
+
+
+def _touch(task):
+    models, m_index, instance, seed, protocol, methods = task
+    db = _database(models)
+    entry = db.entries[m_index]
+    site, touch = _simulate(entry, m_index, instance, seed, protocol)
+    truth = np.asarray(touch.meta["truth"]["contact"])
+    results = {}
+    for method in methods:
+        start = time.perf_counter()
+        try:
+            rec = recognize(touch, db.entries, method=method)
+        except InputError as exc:
+            results[method] = {"recognized": None, "correct": False, "seconds": time.perf_counter() - start,
+                               "failed": str(exc)}
+            continue
+        reg = rec.registration
+        results[method] = {
+            "recognized": rec.best, "correct": rec.best == entry.name, "seconds": rec.seconds,
+            "error": reg.error if reg else None,
+            "location_error": float(np.linalg.norm(reg.location - truth)) if reg and rec.best == entry.name
+            else None,
+            "runner_up": [rec.ranking[1].model, rec.ranking[1].error] if len(rec.ranking) > 1 and
+            rec.ranking[1].ok else None,
+        }
+    return {"model": entry.name, "protocol": protocol, "instance": instance, "site": site, "results": results}
+
+
+def _code_hash() -> str:
+    """Hash of the package's sources: a changed method invalidates saved records."""
+    h = hashlib.sha256()
+    root = resources.files("tactrec")
+    for path in sorted(Path(str(root)).rglob("*.py")):
+        h.update(path.read_bytes())
+    return h.hexdigest()[:16]
+
+
+def _touch_saved(job):
+    task, folder = job
+    models, m_index, instance, seed, protocol, methods = task
+    path = folder / f"{protocol}-{models[m_index]}-{instance}-s{seed}.json"
+    if path.exists():
+        try:
+            saved = json.loads(path.read_text(encoding="utf-8"))
+            if set(methods) <= set(saved["results"]):
+                return saved
+        except (ValueError, KeyError):
+            pass
+    record = _touch(task)
+    write_json(path, record)
+    return record
+
+
+def _summary(records: list[dict], protocol: str, method: str) -> dict:
+    rows = [r["results"][method] for r in records if r["protocol"] == protocol and method in r["results"]]
+    if not rows:
+        return {}
+    located = [r["location_error"] for r in rows if r.get("location_error") is not None]
+    return {"touches": len(rows),
+            "success_percent": 100.0 * float(np.mean([r["correct"] for r in rows])),
+            "median_seconds": float(np.median([r["seconds"] for r in rows])),
+            "mean_seconds": float(np.mean([r["seconds"] for r in rows])),
+            "median_location_error_mm": float(np.median(located)) if located else None,
+            "misses": [(rec["model"], rec["site"], rec["results"][method]["recognized"]) for rec in records
+                       if rec["protocol"] == protocol and method in rec["results"]
+                       and not rec["results"][method]["correct"]]}
+
+
+def run(*, out, instances: int = 10, seed: int = 0, jobs: int | None = None, quiet: bool = False,
+        models: tuple[str, ...] | None = None, protocols=tuple(PROTOCOLS), methods=METHODS, **_ignored) -> dict:
+    """Run both methods on the same touches; write ``fast-vs-paper.json``, ``.md`` and ``.png``."""
+    out = Path(out)
+    models = tuple(models or BUILTIN_SETS["paper-fig11"])
+    tasks = [(models, m, i, seed, p, tuple(methods)) for p in protocols for m in range(len(models))
+             for i in range(instances)]
+    parts = out / "fast-vs-paper.parts" / _code_hash()
+    parts.mkdir(parents=True, exist_ok=True)
+    records = run_parallel(_touch_saved, [(t, parts) for t in tasks], jobs=jobs or default_jobs(), quiet=quiet,
+                           desc="fast-vs-paper")
+    table = {"benchmark": "fast-vs-paper", "instances": instances, "seed": seed, "models": list(models),
+             "protocols": {p: PROTOCOLS[p] for p in protocols}, "paper_p3": PAPER,
+             "summary": {p: {m: _summary(records, p, m) for m in methods} for p in protocols}}
+    for p in protocols:
+        s = table["summary"][p]
+        if "fast" in s and "paper" in s and s["fast"] and s["paper"]:
+            s["speedup_of_medians"] = s["paper"]["median_seconds"] / s["fast"]["median_seconds"]
+    table["records"] = records
+    out.mkdir(parents=True, exist_ok=True)
+    write_json(out / "fast-vs-paper.json", table)
+    markdown = _markdown(table)
+    (out / "fast-vs-paper.md").write_text(markdown, encoding="utf-8")
+    table["plots"] = [str(_plot(table, out))]
+    table["text"] = markdown
+    return table
+
+
+def _markdown(table: dict) -> str:
+    lines = [f"{len(table['models'])} YCB scans, {table['instances']} touches each per protocol (seed "
+             f"{table['seed']}); both methods on the same touches.", "",
+             "| protocol | method | success | median s | mean s | median contact error (mm) |",
+             "|---|---|---|---|---|---|"]
+    for p, by_method in table["summary"].items():
+        for m, s in by_method.items():
+            if not isinstance(s, dict) or not s:
+                continue
+            loc = s["median_location_error_mm"]
+            lines.append(f"| {p} | {m} | {s['success_percent']:.0f}% | {s['median_seconds']:.3g} | "
+                         f"{s['mean_seconds']:.3g} | {'-' if loc is None else f'{loc:.3f}'} |")
+        if "speedup_of_medians" in by_method:
+            lines.append(f"| {p} | paper / fast | | {by_method['speedup_of_medians']:.0f}x | | |")
+    lines.append(f"| p3 | the paper's own (Fig. 11) | {PAPER['success_percent']}% | {PAPER['seconds']} | | |")
+    return "\n".join(lines) + "\n"
+
+
+def _plot(table, out: Path) -> Path:
+    from ..plots import _plt, save_figure
+
+    plt = _plt()
+    fig, axes = plt.subplots(1, 2, figsize=(11, 3.8))
+    protocols = list(table["summary"])
+    methods = [m for m in METHODS if any(table["summary"][p].get(m) for p in protocols)]
+    width = 0.8 / max(1, len(methods))
+    for k, m in enumerate(methods):
+        xs = np.arange(len(protocols)) + (k - (len(methods) - 1) / 2) * width
+        ys = [table["summary"][p].get(m, {}).get("success_percent", 0.0) for p in protocols]
+        axes[0].bar(xs, ys, width, label=m)
+        for x, y in zip(xs, ys):
+            axes[0].annotate(f"{y:.0f}%", (x, y), ha="center", va="bottom", fontsize=8)
+        times = [[r["results"][m]["seconds"] for r in table["records"] if r["protocol"] == p and m in r["results"]]
+                 for p in protocols]
+        axes[1].boxplot(times, positions=xs, widths=width * 0.9, showfliers=False,
+                        patch_artist=True, boxprops={"facecolor": f"C{k}"}, medianprops={"color": "k"})
+    axes[0].axhline(table["paper_p3"]["success_percent"], color="gray", ls="--", lw=1, label="paper P3 (Fig. 11)")
+    axes[0].set_xticks(range(len(protocols)), protocols)
+    axes[0].set_ylabel("correct (%)")
+    axes[0].set_ylim(0, 105)
+    axes[0].legend(loc="lower right", fontsize=8)
+    axes[1].set_yscale("log")
+    axes[1].set_xticks(range(len(protocols)), protocols)
+    axes[1].set_ylabel("seconds per recognition (10 models)")
+    fig.suptitle("fast vs paper, same touches")
+    fig.tight_layout()
+    path = out / "fast-vs-paper.png"
+    save_figure(fig, path)
+    return path
