@@ -37,7 +37,7 @@ __all__ = ["Database", "BuildReport", "build_database", "load_database", "build_
 FORMAT = "tactrec-db"
 VERSION = 1
 #: bump when table construction changes, so that old tables are rebuilt
-TABLE_VERSION = 1
+TABLE_VERSION = 2
 
 
 @dataclasses.dataclass

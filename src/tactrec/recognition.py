@@ -10,7 +10,9 @@ the smallest error is recognised (eq. 9).  When the touch carries no
 from __future__ import annotations
 
 import dataclasses
+import os
 import time
+from concurrent.futures import ThreadPoolExecutor
 from typing import Iterable
 
 import numpy as np
@@ -104,6 +106,15 @@ def register_on_model(entry: ModelEntry, data: TactileData, geom: LocalGeometry,
     return dataclasses.replace(best, candidates=total)
 
 
+#: models are dealt into this many shares, each registered in order with its own bound
+SHARES = 2
+
+
+def default_threads() -> int:
+    """Threads for a recognition: two where the machine has them."""
+    return max(1, min(2, os.cpu_count() or 1))
+
+
 def _rank_key(r: Registration):
     """Accepted models first, by error in the data's units (models may differ in units)."""
     return (not r.ok, r.error / r.scale if r.ok else 0.0, r.model)
@@ -129,7 +140,7 @@ def _polished(ranking: list[Registration], models: list[ModelEntry], data: Tacti
 
 def recognize(data: TactileData, models: Iterable[ModelEntry], *, method: str = DEFAULT_METHOD,
               window: int | str | None = "auto", degree: int = 3, curvature_method: str = "auto",
-              polish: int = 3, **options) -> Recognition:
+              polish: int = 3, threads: int | None = None, **options) -> Recognition:
     """Recognise a touch against ``models`` (Section 3.3).
 
     Parameters
@@ -144,21 +155,37 @@ def recognize(data: TactileData, models: Iterable[ModelEntry], *, method: str = 
     polish : int
         How many of the best models get the method's final refinement (if it
         has one: ``fast``).
+    threads : int, optional
+        Models registered in parallel (default: up to two, the cores of a
+        small machine).  The models are dealt into :data:`SHARES` fixed
+        shares, so the result depends neither on this nor on scheduling.
     **options
         Passed to the registration (e.g. ``delta``).  Each model after the
         first also gets ``bound``, the best error so far, which ``fast`` uses
         to skip hopeless models early.
     """
     start = time.perf_counter()
+    threads = default_threads() if threads is None else threads
     geom = estimate(data, window=window, degree=degree, method=curvature_method)
     models = list(models)
-    ranking, bound = [], np.inf          # bound: the best error so far, in the data's units
-    for entry in models:
-        scale = conversion(data.units, getattr(entry.model, "units", None))
-        r = register_on_model(entry, data, geom, method=method, bound=bound * scale, **options)
-        ranking.append(r)
-        if r.ok:
-            bound = min(bound, r.error / r.scale)
+    def share(part: list[ModelEntry]) -> list[Registration]:
+        out, bound = [], np.inf          # the best error so far in this share, in the data's units
+        for entry in part:
+            scale = conversion(data.units, getattr(entry.model, "units", None))
+            r = register_on_model(entry, data, geom, method=method, bound=bound * scale, **options)
+            out.append(r)
+            if r.ok:
+                bound = min(bound, r.error / r.scale)
+        return out
+
+    # fixed shares (every SHARES-th model), each with its own bound: the same result whatever the
+    # number of threads and however they are scheduled
+    parts = [models[i::SHARES] for i in range(SHARES)]
+    if int(threads) > 1:
+        with ThreadPoolExecutor(max_workers=min(int(threads), SHARES)) as pool:
+            ranking = [r for part in pool.map(share, parts) for r in part]
+    else:
+        ranking = [r for part in parts for r in share(part)]
     ranking.sort(key=_rank_key)
     ranking = _polished(ranking, models, data, geom, method, polish)
     ranking.sort(key=_rank_key)

@@ -44,7 +44,7 @@ DEFAULTS = {
     "candidates": 150,      # distinct places kept after ranking every vertex by curvature
     "spread": 4.0,          # at most one candidate per cell of (touch radius / spread)
     "coarse_points": 8,     # data points per curve in the cheap stages
-    "coarse_iterations": 4,  # Gauss-Newton steps on vertex planes, every pose
+    "coarse_iterations": 2,  # Gauss-Newton steps on vertex planes, every pose
     "refine": 16,           # candidates refined on the exact surface
     "iterations": 10,
     "final": 3,             # poses refined again with all data points
@@ -56,12 +56,8 @@ DEFAULTS = {
 
 
 def curvature_field(model: MeshModel) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
-    """``k1, k2 (V,), d1 (V, 3)`` of every vertex and the fit radius, computed once per model."""
-    field = model.__dict__.get("_fast_curvature_field")
-    if field is None:
-        radius = 3.0 * model.mean_edge
-        field = model.__dict__["_fast_curvature_field"] = (*model.curvature_field(radius=radius), radius)
-    return field
+    """``k1, k2 (V,), d1 (V, 3)`` of every vertex and the fit radius (:attr:`MeshModel.fine_curvatures`)."""
+    return model.fine_curvatures
 
 
 def prepare(model: MeshModel) -> None:
@@ -190,7 +186,9 @@ def register(model: MeshModel, table: CurvatureTable, geometry: LocalGeometry, p
     gap = np.hypot(k1 - dk1, k2 - dk2)
     order = np.argsort(gap, kind="stable")
     cell = np.floor((model.vertices[order] - model.vertices.min(axis=0)) / (radius / spread)).astype(np.int64)
-    _, first = np.unique(cell, axis=0, return_index=True)
+    cell -= cell.min(axis=0)
+    span = cell.max(axis=0) + 1
+    _, first = np.unique((cell[:, 0] * span[1] + cell[:, 1]) * span[2] + cell[:, 2], return_index=True)
     chosen = order[np.sort(first)][:candidates]
     # 2. poses from the frames: data (t1, t2, N) onto vertex (d1, n x d1, n), rotated psi about the normal
     umbilic = umbilic / radius

@@ -123,8 +123,10 @@ class MeshModel(SurfaceModel):
 
     # ------------------------------------------------------------------ storage
     def to_store(self) -> dict[str, np.ndarray]:
+        k1, k2, d1, radius = self.fine_curvatures
         return {"mesh_vertices": self.vertices, "mesh_faces": self.faces,
-                "mesh_units": np.array(self.units or ""), "mesh_scale": np.array(self.scale)}
+                "mesh_units": np.array(self.units or ""), "mesh_scale": np.array(self.scale),
+                "mesh_k1": k1, "mesh_k2": k2, "mesh_d1": d1, "mesh_fit_radius": np.array(radius)}
 
     @classmethod
     def from_store(cls, arrays, *, name: str, source: str) -> "MeshModel":
@@ -133,7 +135,16 @@ class MeshModel(SurfaceModel):
         if faces.ndim != 2 or faces.shape[1] != 3 or faces.min() < 0 or faces.max() >= len(vertices):
             raise ValueError("mesh faces do not index its vertices")
         units = str(arrays["mesh_units"]) or None
-        return cls(vertices, faces, name=name, units=units, source=source, scale=float(arrays["mesh_scale"]))
+        model = cls(vertices, faces, name=name, units=units, source=source, scale=float(arrays["mesh_scale"]))
+        if "mesh_k1" in arrays:
+            field = (np.asarray(arrays["mesh_k1"], dtype=np.float64), np.asarray(arrays["mesh_k2"], dtype=np.float64),
+                     np.asarray(arrays["mesh_d1"], dtype=np.float64), float(arrays["mesh_fit_radius"]))
+            n = len(model.vertices)
+            if field[0].shape != (n,) or field[1].shape != (n,) or field[2].shape != (n, 3) \
+                    or not all(np.all(np.isfinite(a)) for a in field[:3]):
+                raise ValueError("the stored curvature field does not match the mesh")
+            model.__dict__["fine_curvatures"] = field
+        return model
 
     # ------------------------------------------------------------------ geometry
     @cached_property
@@ -300,11 +311,18 @@ class MeshModel(SurfaceModel):
         local = np.einsum("vkj,vji->vki", self.vertices[idx] - self.vertices[:, None, :], frames)
         agree = np.einsum("vkj,vj->vk", self.vertex_normals[idx], self.vertex_normals) > 0.5
         weight = (agree & ((dist <= radius) | (np.arange(count) < 12))).astype(float)
-        k1, k2, (u, v), rms = quadric_curvatures(local, weight, residual=True)
-        self.__dict__["_fit_residual"] = rms
+        k1, k2, (u, v) = quadric_curvatures(local, weight)
         t1, t2, n = frames[:, :, 0], frames[:, :, 1], frames[:, :, 2]
         d1 = u[:, None] * t1 + v[:, None] * t2 + 0.0 * n
         return k1, k2, _unit_rows(d1)
+
+    @cached_property
+    def fine_curvatures(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+        """:meth:`curvature_field` at three mean edges, and that radius: ``k1, k2 (V,), d1 (V, 3), radius``.
+
+        Kept in a database, so a recognition does not recompute it."""
+        radius = 3.0 * self.mean_edge
+        return (*self.curvature_field(radius=radius), radius)
 
     def table_samples(self, *, resolution=None, rng=0) -> TableSamples:
         """The paper's mesh table: sampled vertices with fitted curvatures."""
@@ -492,7 +510,7 @@ def clean_mesh(vertices: np.ndarray, faces: np.ndarray):
     return vertices, faces, report
 
 
-def quadric_curvatures(local: np.ndarray, weight: np.ndarray, *, residual: bool = False):
+def quadric_curvatures(local: np.ndarray, weight: np.ndarray):
     """Principal curvatures at the origin of ``z = a x^2 + b xy + c y^2 + d x + e y + f``
     fitted (weighted least squares) to points ``local (n, k, 3)`` given in
     frames ``(t1, t2, N)``, ``n`` fits at once; ``weight (n, k)``.
@@ -525,10 +543,6 @@ def quadric_curvatures(local: np.ndarray, weight: np.ndarray, *, residual: bool 
     v = np.where(np.sum(r1 * r1, axis=0) >= np.sum(r2 * r2, axis=0), r1, r2)
     norm = np.hypot(v[0], v[1])
     v = np.where(norm > 1e-300, v / np.where(norm > 1e-300, norm, 1.0), np.array([[1.0], [0.0]]) * np.ones_like(norm))
-    if residual:
-        rms = np.sqrt(np.sum(weight * (np.einsum("vki,vi->vk", A, coef) - z) ** 2, axis=-1)
-                      / np.maximum(np.sum(weight, axis=-1), 1e-300))
-        return k1, k2, v, rms
     return k1, k2, v
 
 
@@ -548,28 +562,14 @@ def paraboloid_curvatures(center: np.ndarray, normal: np.ndarray, neighbours: np
     rel = neighbours - center
     order = np.argsort(np.linalg.norm(rel, axis=1))
     local = rel[order] @ np.stack([t1, t2, n]).T
-    results = []
-    for s in sorted(set(min(s, len(local)) for s in sizes)):
-        if s < 6:
-            continue
-        x, y, z = local[:s, 0], local[:s, 1], local[:s, 2]
-        scale = float(np.max(np.hypot(x, y))) or 1.0
-        X, Y = x / scale, y / scale
-        A = np.stack([X * X, X * Y, Y * Y, X, Y, np.ones_like(X)], axis=1)
-        coef, _, rank, _ = np.linalg.lstsq(A, z, rcond=None)
-        if rank < 6:
-            continue
-        a, b, c = coef[0] / scale**2, coef[1] / scale**2, coef[2] / scale**2
-        d, e = coef[3] / scale, coef[4] / scale
-        w = np.sqrt(1 + d * d + e * e)
-        E, F, G = 1 + d * d, d * e, 1 + e * e
-        L, M, N = 2 * a / w, b / w, 2 * c / w
-        det = E * G - F * F
-        H = (E * N - 2 * F * M + G * L) / (2 * det)
-        K = (L * N - M * M) / det
-        root = np.sqrt(max(H * H - K, 0.0))
-        results.append((H + root, H - root))
-    if not results:
+    counts = [s for s in sorted(set(min(s, len(local)) for s in sizes)) if s >= 6]
+    # a fit needs six independent monomials among its points
+    counts = [s for s in counts
+              if np.linalg.matrix_rank(np.stack([local[:s, 0] ** 2, local[:s, 0] * local[:s, 1], local[:s, 1] ** 2,
+                                                 local[:s, 0], local[:s, 1], np.ones(s)], axis=1)) == 6]
+    if not counts:
         return float("nan"), float("nan")
-    arr = np.array(results)
+    weight = (np.arange(len(local))[None, :] < np.array(counts)[:, None]).astype(float)
+    k1, k2, _ = quadric_curvatures(np.broadcast_to(local, (len(counts), *local.shape)), weight)
+    arr = np.stack([k1, k2], axis=1)
     return float(np.median(arr[:, 0])), float(np.median(arr[:, 1]))
