@@ -135,3 +135,29 @@ def test_database_keeps_the_curvature_field_and_rejects_a_corrupted_one(tmp_path
     (out / "index.json").write_text(json.dumps(index))
     with pytest.raises(InputError, match="corrupted database file"):
         load_database(out)
+
+
+def test_ambiguity_flag_in_the_json(table1):
+    """Two identical models cannot be told apart: flagged; a clear winner is not."""
+    entry = table1.get("ellipsoid")
+    twin = type(entry)(load_model("ellipsoid"), entry.table)
+    touch = simulate_random_touch(entry.model, rng=2, **P)
+    clear = recognize(touch, table1).to_json()
+    assert clear["best"] == "ellipsoid" and clear["ambiguous"] is False and clear["margin"] > 0
+    same = recognize(touch, [entry, twin]).to_json()
+    assert same["ambiguous"] is True
+
+
+def test_fast_vs_paper_bench_writes_its_table_and_plot(tmp_path):
+    from tactrec.bench import fast_vs_paper
+
+    table = fast_vs_paper.run(out=tmp_path, instances=1, models=("banana", "pear"), protocols=("p3",), quiet=True)
+    s = table["summary"]["p3"]
+    assert s["fast"]["touches"] == s["paper"]["touches"] == 2
+    assert s["fast"]["success_percent"] == 100.0
+    assert s["speedup_of_medians"] > 1.0
+    assert (tmp_path / "fast-vs-paper.md").read_text().count("| p3 |") >= 3
+    assert (tmp_path / "fast-vs-paper.png").read_bytes()[:4] == b"\x89PNG"
+    # a second run reuses every saved record
+    again = fast_vs_paper.run(out=tmp_path, instances=1, models=("banana", "pear"), protocols=("p3",), quiet=True)
+    assert again["records"] == table["records"]

@@ -29,7 +29,7 @@ from .io.touch import TactileData
 
 __all__ = [
     "CurveFit", "LocalGeometry", "fit_curve", "data_normal", "principal_curvatures",
-    "find_contact", "check_meeting", "estimate",
+    "find_contact", "check_meeting", "estimate", "noise_level",
 ]
 
 
@@ -188,7 +188,7 @@ FACETS = 4.0       # smallest window, in straight pieces of a polyline, each sid
 BIAS_LIMIT = 0.3   # windows no wider than this over kappa: a parabola's relative bias ~ 0.21 (h kappa)^2
 
 
-def _noise_level(points: np.ndarray) -> float:
+def noise_level(points: np.ndarray) -> float:
     """Noise sigma per coordinate from third differences (robust: median absolute value)."""
     d3 = np.diff(points, n=3, axis=0)
     if len(d3) == 0:
@@ -213,7 +213,7 @@ def _facet_length(points: np.ndarray) -> float:
 
 
 def _fit_adaptive(points: np.ndarray, contact: np.ndarray, i0: int, degree: int) -> CurveFit:
-    sigma = _noise_level(points)
+    sigma = noise_level(points)
     plane = _sampling_plane(points)          # the whole curve fixes its plane best
     n_side = max(i0, len(points) - 1 - i0)
     # a window must span a few straight pieces: below that, it sees the facets, not the surface

@@ -17,7 +17,7 @@ from typing import Iterable
 
 import numpy as np
 
-from .estimation import LocalGeometry, estimate
+from .estimation import LocalGeometry, estimate, noise_level
 from .io.touch import TactileData
 from .registration import DEFAULT_METHOD, Registration, get_polisher, get_registrar
 from .tables import CurvatureTable
@@ -53,6 +53,12 @@ class Recognition:
     seconds : float
         Wall time of the recognition.
     method : str
+    margin : float
+        How much better than the runner-up the best model must fit to be
+        told apart from it, data units: ``max(2 sigma / sqrt(m), 0.1 E1)``,
+        ``sigma`` the data's noise (per coordinate, from third differences
+        along the curves), ``m`` the number of data points, ``E1`` the best
+        error.
     """
 
     best: str | None
@@ -60,6 +66,16 @@ class Recognition:
     estimate: LocalGeometry
     seconds: float
     method: str
+    margin: float = 0.0
+
+    @property
+    def ambiguous(self) -> bool:
+        """True when the runner-up's error is within :attr:`margin` of the best's: the touch
+        fits both models about equally well, and the ranking between them is not to be trusted."""
+        ok = [r for r in self.ranking if r.ok]
+        if len(ok) < 2:
+            return False
+        return bool(ok[1].error / ok[1].scale - ok[0].error / ok[0].scale <= self.margin)
 
     @property
     def registration(self) -> Registration | None:
@@ -74,6 +90,8 @@ class Recognition:
             "normal": (self.estimate.normal * (self.registration.normal_sign if self.registration else 1)).tolist(),
             "curvatures": [self.estimate.k1, self.estimate.k2],
             "method": self.method,
+            "ambiguous": self.ambiguous,
+            "margin": self.margin,
             "seconds": round(self.seconds, 4),
         }
 
@@ -190,4 +208,7 @@ def recognize(data: TactileData, models: Iterable[ModelEntry], *, method: str = 
     ranking = _polished(ranking, models, data, geom, method, polish)
     ranking.sort(key=_rank_key)
     best = ranking[0].model if ranking and ranking[0].ok else None
-    return Recognition(best, ranking, geom, time.perf_counter() - start, method)
+    sigma = float(np.median([noise_level(np.asarray(c, dtype=np.float64)) for c in data.curves]))
+    e1 = ranking[0].error / ranking[0].scale if best is not None else 0.0
+    margin = float(max(2.0 * sigma / np.sqrt(len(data.points)), 0.1 * e1))
+    return Recognition(best, ranking, geom, time.perf_counter() - start, method, margin)
