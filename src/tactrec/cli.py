@@ -119,8 +119,9 @@ def cmd_recognize(args) -> int:
 
 def _format_result(name: str, result) -> str:
     est = result.estimate
+    flag = ", ambiguous: the runner-up fits within the noise" if result.ambiguous else ""
     lines = [f"{name}: {'best ' + result.best if result.best else 'no model matches'}"
-             f"   (k1 {est.k1:.4g}, k2 {est.k2:.4g}; {result.seconds:.2f} s, method {result.method})"]
+             f"   (k1 {est.k1:.4g}, k2 {est.k2:.4g}; {result.seconds:.2f} s, method {result.method}{flag})"]
     for rank, r in enumerate(result.ranking, start=1):
         if r.ok:
             loc = ", ".join(f"{x:.4g}" for x in r.location)
@@ -231,7 +232,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="one JSON object per data file, one per line")
     p.add_argument("--method", choices=sorted(METHODS), default=DEFAULT_METHOD,
                    help=f"registration method (default {DEFAULT_METHOD})")
-    p.add_argument("--delta", type=_positive, help="lookup tolerance on (k1, k2), 1/model units")
+    p.add_argument("--delta", type=_positive, help="lookup tolerance on (k1, k2), 1/model units (method paper)")
     _mesh_options(p)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_recognize)
@@ -262,7 +263,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--instances", type=_count(1), default=10, help="instances per model (default 10)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--jobs", type=_count(1), default=None, help="worker processes (default: up to 2)")
-    p.add_argument("--method", choices=sorted(METHODS), default="paper", help="method (default paper)")
+    p.add_argument("--method", choices=sorted(METHODS), default="paper",
+                   help="method of the paper-* reproductions (default paper)")
     p.add_argument("--out", metavar="DIR", help="output folder (default bench-out)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_bench)
