@@ -52,6 +52,7 @@ DEFAULTS = {
     "umbilic": 0.05,        # |k1 - k2| x touch radius below this: scan the rotation instead
     "prune": 4.0,           # skip a model whose best cheap score exceeds prune x bound
     "hard": 0.01,           # polish: search again when the error exceeds this x touch radius
+    "exact_below": 4.0,     # a touch under this many mean edges in radius: exact distances from the start
 }
 
 
@@ -167,7 +168,8 @@ def register(model: MeshModel, table: CurvatureTable, geometry: LocalGeometry, p
              coarse_iterations: int = DEFAULTS["coarse_iterations"], refine_poses: int = DEFAULTS["refine"],
              iterations: int = DEFAULTS["iterations"], final: int = DEFAULTS["final"],
              final_iterations: int = DEFAULTS["final_iterations"], umbilic: float = DEFAULTS["umbilic"],
-             prune: float = DEFAULTS["prune"], tilt: float = 0.0, **_ignored) -> Registration:
+             prune: float = DEFAULTS["prune"], exact_below: float = DEFAULTS["exact_below"], tilt: float = 0.0,
+    **_ignored) -> Registration:
     """Register the data curves onto ``model`` (steps 1-4 of the module text).
 
     ``points (m, 3)`` are all data points and ``curves`` the same points curve
@@ -208,7 +210,8 @@ def register(model: MeshModel, table: CurvatureTable, geometry: LocalGeometry, p
     t = model.vertices[chosen][owner] - np.einsum("hij,j->hi", R, geometry.contact)
     # 3. a few cheap Gauss-Newton steps for every pose; each candidate's best rotation, the best candidates
     subset = _subset(curves, coarse_points)
-    R, t, cheap = refine(model, R, t, subset, iterations=coarse_iterations, exact=False)
+    R, t, cheap = refine(model, R, t, subset, iterations=coarse_iterations,
+                         exact=radius < exact_below * model.mean_edge)
     order = np.lexsort((cheap, owner))
     per_candidate = order[np.r_[True, owner[order][1:] != owner[order][:-1]]]
     keep = per_candidate[np.argsort(cheap[per_candidate])][:refine_poses]
@@ -227,11 +230,14 @@ def register(model: MeshModel, table: CurvatureTable, geometry: LocalGeometry, p
 def polish(model: MeshModel, registration: Registration, geometry: LocalGeometry, points: np.ndarray, *,
            curves=None, table: CurvatureTable | None = None, best: float = 0.0, iterations: int = 30,
            hard: float = DEFAULTS["hard"]) -> Registration:
-    """Refine ``registration`` further on all points.  If neither it nor the best
-    registration on any model (error ``best``) fits better than ``hard`` x the
-    touch's radius (a touch across a crease, where the estimated normal can be tens of degrees
-    off), search again more widely: every 30 degrees about the normal at every candidate, with
-    the normal tilted 15 degrees four ways, twice as many poses refined."""
+    """Refine ``registration`` further on all points.
+
+    If neither it nor the best registration on any model (error ``best``)
+    fits better than ``hard`` x the touch's radius (a touch across a crease,
+    where the estimated normal can be tens of degrees off), search again more
+    widely: every 30 degrees about the normal at every candidate, the normal
+    tilted 15 degrees four ways, twice the cheap steps (on the smoother
+    vertex planes) and twice the poses refined."""
     x = np.asarray(points, dtype=np.float64)
     R, t, error = refine(model, registration.rotation[None], registration.translation[None], x,
                          iterations=iterations)
@@ -240,7 +246,8 @@ def polish(model: MeshModel, registration: Registration, geometry: LocalGeometry
         out = _result(model, geometry, R[0], t[0], error[0], registration.candidates)
     radius = float(np.max(np.linalg.norm(x - geometry.contact, axis=1)))
     if curves is not None and table is not None and min(best, registration.error) > hard * radius:
-        wide = register(model, table, geometry, x, curves=curves, umbilic=np.inf, tilt=15.0,
+        wide = register(model, table, geometry, x, curves=curves, umbilic=np.inf, tilt=15.0, exact_below=0.0,
+                        coarse_iterations=2 * DEFAULTS["coarse_iterations"],
                         refine_poses=2 * DEFAULTS["refine"])
         if wide.ok and wide.error < out.error:
             out = wide
