@@ -161,3 +161,20 @@ def test_fast_vs_paper_bench_writes_its_table_and_plot(tmp_path):
     # a second run reuses every saved record
     again = fast_vs_paper.run(out=tmp_path, instances=1, models=("banana", "pear"), protocols=("p3",), quiet=True)
     assert again["records"] == table["records"]
+
+
+def test_scale_bench_reports_top1_top3_and_time_by_model_count(tmp_path, monkeypatch):
+    """The 78-scan benchmark's bookkeeping, on three scans (the full run is a benchmark)."""
+    from tactrec.bench import scale
+
+    db = build_entries(["banana", "pear", "apple"])
+    for entry in db.entries:
+        mesh_fast.prepare(entry.model)
+    monkeypatch.setattr(scale, "_database", lambda: db)
+    monkeypatch.setattr(scale, "ycb_names", lambda: ("banana", "pear", "apple"))
+    monkeypatch.setattr(scale, "SIZES", (2,))
+    table = scale.run_scale(out=tmp_path, instances=1, quiet=True)
+    assert table["all"]["touches"] == 3 and table["all"]["top1_percent"] == 100.0
+    assert table["all"]["top3_percent"] == 100.0
+    assert set(table["sizes"]) == {"2", "3"} and table["sizes"]["2"]["touches"] >= 1
+    assert (tmp_path / "scale.json").exists() and "top-1" in table["text"]

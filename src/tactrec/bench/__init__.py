@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import Callable
 
-from . import fast_vs_paper, paper_closedform, paper_example, paper_fig11, paper_mesh
+from . import fast_vs_paper, paper_closedform, paper_example, paper_fig11, paper_mesh, scale
 
 __all__ = ["BENCHMARKS"]
 
@@ -20,4 +20,6 @@ BENCHMARKS: dict[str, Callable[..., dict]] = {
     "paper-table4": paper_mesh.run_table4,
     "paper-fig11": paper_fig11.run_fig11,
     "fast-vs-paper": fast_vs_paper.run,
+    "scale": scale.run_scale,
+    "scale-exhaustive": scale.run_exhaustive,
 }

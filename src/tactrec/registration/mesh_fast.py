@@ -162,19 +162,48 @@ def _result(model: MeshModel, geometry: LocalGeometry, R, t, error, candidates: 
                         candidates=candidates, site=np.array([float(face[0])]), phi=None)
 
 
+#: candidates posed and scored at once (bounds the memory of an exhaustive search)
+CHUNK = 1000
+
+
+def _cheap_poses(model, geometry, curves, chosen, k1, k2, d1, direction, radius, *, umbilic, dk, tilt,
+                 coarse_points, coarse_iterations, exact):
+    """Steps 2-3 for the candidate vertices ``chosen (c,)``: each one's best pose ``R (c, 3, 3), t (c, 3)``
+    after the cheap Gauss-Newton steps, and its cheap score ``(c,)``."""
+    n = model.vertex_normals[chosen]
+    F = np.stack([d1[chosen], np.cross(n, d1[chosen]), n], axis=2)                  # (c, 3, 3) columns
+    scan = (np.abs(k1[chosen] - k2[chosen]) < umbilic) | (abs(dk[0] - dk[1]) < umbilic)
+    psis = [np.deg2rad(np.arange(0.0, 360.0, 30.0)) if s else np.array([0.0, np.pi]) for s in scan]
+    owner = np.repeat(np.arange(len(chosen)), [len(p) for p in psis])
+    R = F[owner] @ rotations_z(np.concatenate(psis))
+    if tilt > 0:
+        a = np.deg2rad(tilt)
+        T = _rotations(np.array([[0, 0, 0], [a, 0, 0], [-a, 0, 0], [0, a, 0], [0, -a, 0]], dtype=float))
+        R = (R[:, None] @ T[None]).reshape(-1, 3, 3)
+        owner = np.repeat(owner, len(T))
+    R = R @ local_frame(geometry.normal, direction)
+    t = model.vertices[chosen][owner] - np.einsum("hij,j->hi", R, geometry.contact)
+    R, t, cheap = refine(model, R, t, _subset(curves, coarse_points), iterations=coarse_iterations, exact=exact)
+    order = np.lexsort((cheap, owner))
+    best = order[np.r_[True, owner[order][1:] != owner[order][:-1]]]             # one per candidate, in order
+    return R[best], t[best], cheap[best]
+
+
 def register(model: MeshModel, table: CurvatureTable, geometry: LocalGeometry, points: np.ndarray, *,
              curves=None, bound: float = np.inf, candidates: int = DEFAULTS["candidates"],
              spread: float = DEFAULTS["spread"], coarse_points: int = DEFAULTS["coarse_points"],
              coarse_iterations: int = DEFAULTS["coarse_iterations"], refine_poses: int = DEFAULTS["refine"],
              iterations: int = DEFAULTS["iterations"], final: int = DEFAULTS["final"],
              final_iterations: int = DEFAULTS["final_iterations"], umbilic: float = DEFAULTS["umbilic"],
-             prune: float = DEFAULTS["prune"], exact_below: float = DEFAULTS["exact_below"], tilt: float = 0.0,
-    **_ignored) -> Registration:
+                      prune: float = DEFAULTS["prune"], exact_below: float = DEFAULTS["exact_below"], tilt: float = 0.0,
+             exhaustive: bool = False, **_ignored) -> Registration:
     """Register the data curves onto ``model`` (steps 1-4 of the module text).
 
     ``points (m, 3)`` are all data points and ``curves`` the same points curve
     by curve, in model units; ``geometry`` the estimate (``table`` is not
     used: the candidates come from the curvature of every vertex).
+    ``exhaustive`` starts from every vertex under every 30-degree rotation
+    (no ranking, no pruning): the reference the ranking is measured against.
     """
     if curves is None:
         raise ValueError("mesh registration needs the data curves")
@@ -191,31 +220,18 @@ def register(model: MeshModel, table: CurvatureTable, geometry: LocalGeometry, p
     cell -= cell.min(axis=0)
     span = cell.max(axis=0) + 1
     _, first = np.unique((cell[:, 0] * span[1] + cell[:, 1]) * span[2] + cell[:, 2], return_index=True)
-    chosen = order[np.sort(first)][:candidates]
-    # 2. poses from the frames: data (t1, t2, N) onto vertex (d1, n x d1, n), rotated psi about the normal
-    umbilic = umbilic / radius
-    n = model.vertex_normals[chosen]
-    F = np.stack([d1[chosen], np.cross(n, d1[chosen]), n], axis=2)                  # (c, 3, 3) columns
-    scan = (np.abs(k1[chosen] - k2[chosen]) < umbilic) | (abs(dk1 - dk2) < umbilic)
-    psis = [np.deg2rad(np.arange(0.0, 360.0, 30.0)) if s else np.array([0.0, np.pi]) for s in scan]
-    owner = np.repeat(np.arange(len(chosen)), [len(p) for p in psis])
-    L = local_frame(geometry.normal, direction)
-    R = F[owner] @ rotations_z(np.concatenate(psis))
-    if tilt > 0:
-        a = np.deg2rad(tilt)
-        T = _rotations(np.array([[0, 0, 0], [a, 0, 0], [-a, 0, 0], [0, a, 0], [0, -a, 0]], dtype=float))
-        R = (R[:, None] @ T[None]).reshape(-1, 3, 3)
-        owner = np.repeat(owner, len(T))
-    R = R @ L
-    t = model.vertices[chosen][owner] - np.einsum("hij,j->hi", R, geometry.contact)
-    # 3. a few cheap Gauss-Newton steps for every pose; each candidate's best rotation, the best candidates
-    subset = _subset(curves, coarse_points)
-    R, t, cheap = refine(model, R, t, subset, iterations=coarse_iterations,
-                         exact=radius < exact_below * model.mean_edge)
-    order = np.lexsort((cheap, owner))
-    per_candidate = order[np.r_[True, owner[order][1:] != owner[order][:-1]]]
-    keep = per_candidate[np.argsort(cheap[per_candidate])][:refine_poses]
-    if np.isfinite(bound):
+    chosen = order if exhaustive else order[np.sort(first)][:candidates]
+    # 2.-3. poses from the frames, a few cheap Gauss-Newton steps for each; each candidate's best rotation
+    poses = [_cheap_poses(model, geometry, curves, chosen[i:i + CHUNK], k1, k2, d1, direction, radius,
+                          umbilic=np.inf if exhaustive else umbilic / radius, dk=(dk1, dk2), tilt=tilt,
+                          coarse_points=coarse_points, coarse_iterations=coarse_iterations,
+                          exact=radius < exact_below * model.mean_edge)
+             for i in range(0, len(chosen), CHUNK)]
+    R = np.concatenate([p[0] for p in poses])
+    t = np.concatenate([p[1] for p in poses])
+    cheap = np.concatenate([p[2] for p in poses])
+    keep = np.argsort(cheap)[:refine_poses]
+    if np.isfinite(bound) and not exhaustive:
         keep = keep[cheap[keep] <= prune * bound]
         if len(keep) == 0:
             return Registration.rejection(model.name, f"pruned: no pose came near the best error {bound:.3g}")

