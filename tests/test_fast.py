@@ -178,3 +178,30 @@ def test_scale_bench_reports_top1_top3_and_time_by_model_count(tmp_path, monkeyp
     assert table["all"]["top3_percent"] == 100.0
     assert set(table["sizes"]) == {"2", "3"} and table["sizes"]["2"]["touches"] >= 1
     assert (tmp_path / "scale.json").exists() and "top-1" in table["text"]
+
+
+def test_baselines_need_open3d_or_run(tmp_path):
+    """Without the optional extra: one clear line.  With it: every method on the same touch."""
+    from tactrec.bench import baselines
+
+    try:
+        baselines.open3d()
+    except InputError as exc:
+        assert "pip install 'tactrec[baselines]'" in str(exc)
+        with pytest.raises(InputError):
+            baselines.run(out=tmp_path, instances=1, models=("banana", "pear"), protocols=("p3",), quiet=True)
+        return
+    table = baselines.run(out=tmp_path, instances=1, models=("banana", "pear"), protocols=("p3",), quiet=True)
+    assert set(table["summary"]["p3"]) == set(baselines.METHODS)
+    assert table["summary"]["p3"]["fast"]["success_percent"] == 100.0
+
+
+def test_starting_poses_put_the_contact_on_candidate_vertices(scans):
+    m = scans.get("pear").model
+    touch = simulate_touch(m, [2023], points=81, spacing=0.3, angle=60.0, rng=1)
+    geom = estimate(touch)
+    R, t = mesh_fast.starting_poses(m, geom, touch.points, count=10)
+    assert 20 <= len(R) <= 120
+    contacts = np.einsum("hij,j->hi", R, geom.contact) + t
+    assert np.max(m.distance(contacts)) < 1e-9                      # each start sits on a vertex
+    assert np.allclose(np.einsum("hji,hjk->hik", R, R), np.eye(3), atol=1e-9)

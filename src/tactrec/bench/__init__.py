@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import Callable
 
-from . import fast_vs_paper, paper_closedform, paper_example, paper_fig11, paper_mesh, scale
+from . import baselines, fast_vs_paper, paper_closedform, paper_example, paper_fig11, paper_mesh, scale
 
 __all__ = ["BENCHMARKS"]
 
@@ -22,4 +22,5 @@ BENCHMARKS: dict[str, Callable[..., dict]] = {
     "fast-vs-paper": fast_vs_paper.run,
     "scale": scale.run_scale,
     "scale-exhaustive": scale.run_exhaustive,
+    "baselines": baselines.run,
 }

@@ -38,7 +38,7 @@ from ..surfaces.mesh import MeshModel, quadric_curvatures
 from ..tables import CurvatureTable
 from .result import Registration, local_frame, rotations_z
 
-__all__ = ["register", "polish", "refine", "prepare", "DEFAULTS", "curvature_field"]
+__all__ = ["register", "polish", "refine", "prepare", "starting_poses", "DEFAULTS", "curvature_field"]
 
 DEFAULTS = {
     "candidates": 150,      # distinct places kept after ranking every vertex by curvature
@@ -166,10 +166,9 @@ def _result(model: MeshModel, geometry: LocalGeometry, R, t, error, candidates: 
 CHUNK = 1000
 
 
-def _cheap_poses(model, geometry, curves, chosen, k1, k2, d1, direction, radius, *, umbilic, dk, tilt,
-                 coarse_points, coarse_iterations, exact):
-    """Steps 2-3 for the candidate vertices ``chosen (c,)``: each one's best pose ``R (c, 3, 3), t (c, 3)``
-    after the cheap Gauss-Newton steps, and its cheap score ``(c,)``."""
+def _frame_poses(model, geometry, chosen, k1, k2, d1, direction, *, umbilic, dk, tilt):
+    """Step 2 for the candidate vertices ``chosen (c,)``: poses ``R (h, 3, 3), t (h, 3)`` and the
+    candidate each belongs to, ``owner (h,)``."""
     n = model.vertex_normals[chosen]
     F = np.stack([d1[chosen], np.cross(n, d1[chosen]), n], axis=2)                  # (c, 3, 3) columns
     scan = (np.abs(k1[chosen] - k2[chosen]) < umbilic) | (abs(dk[0] - dk[1]) < umbilic)
@@ -183,10 +182,49 @@ def _cheap_poses(model, geometry, curves, chosen, k1, k2, d1, direction, radius,
         owner = np.repeat(owner, len(T))
     R = R @ local_frame(geometry.normal, direction)
     t = model.vertices[chosen][owner] - np.einsum("hij,j->hi", R, geometry.contact)
+    return R, t, owner
+
+
+def _cheap_poses(model, geometry, curves, chosen, k1, k2, d1, direction, radius, *, umbilic, dk, tilt,
+                 coarse_points, coarse_iterations, exact):
+    """Steps 2-3 for the candidate vertices ``chosen (c,)``: each one's best pose ``R (c, 3, 3), t (c, 3)``
+    after the cheap Gauss-Newton steps, and its cheap score ``(c,)``."""
+    R, t, owner = _frame_poses(model, geometry, chosen, k1, k2, d1, direction, umbilic=umbilic, dk=dk, tilt=tilt)
     R, t, cheap = refine(model, R, t, _subset(curves, coarse_points), iterations=coarse_iterations, exact=exact)
     order = np.lexsort((cheap, owner))
     best = order[np.r_[True, owner[order][1:] != owner[order][:-1]]]             # one per candidate, in order
     return R[best], t[best], cheap[best]
+
+
+def _candidates(model: MeshModel, geometry: LocalGeometry, x: np.ndarray, radius: float, *, spread: float,
+                count: int | None):
+    """Step 1: vertices ranked by curvature gap, the best of each grid cell (all of them if ``count`` is None).
+
+    Returns the chosen vertices, the data's curvatures ``(k1, k2)`` and first principal direction."""
+    k1, k2, _, fit_radius = curvature_field(model)
+    dk1, dk2, direction = _data_curvatures(model, geometry, x, fit_radius)
+    order = np.argsort(np.hypot(k1 - dk1, k2 - dk2), kind="stable")
+    if count is None:
+        return order, (dk1, dk2), direction
+    cell = np.floor((model.vertices[order] - model.vertices.min(axis=0)) / (radius / spread)).astype(np.int64)
+    cell -= cell.min(axis=0)
+    span = cell.max(axis=0) + 1
+    _, first = np.unique((cell[:, 0] * span[1] + cell[:, 1]) * span[2] + cell[:, 2], return_index=True)
+    return order[np.sort(first)][:count], (dk1, dk2), direction
+
+
+def starting_poses(model: MeshModel, geometry: LocalGeometry, points: np.ndarray, *,
+                   count: int = DEFAULTS["candidates"], spread: float = DEFAULTS["spread"],
+                   umbilic: float = DEFAULTS["umbilic"]) -> tuple[np.ndarray, np.ndarray]:
+    """The poses ``R (h, 3, 3), t (h, 3)`` the search starts from at the best ``count`` candidates
+    (steps 1-2), for other refinements to start from the same places."""
+    x = np.asarray(points, dtype=np.float64)
+    radius = float(np.max(np.linalg.norm(x - geometry.contact, axis=1)))
+    k1, k2, d1, _ = curvature_field(model)
+    chosen, dk, direction = _candidates(model, geometry, x, radius, spread=spread, count=count)
+    R, t, _ = _frame_poses(model, geometry, chosen, k1, k2, d1, direction, umbilic=umbilic / radius, dk=dk,
+                           tilt=0.0)
+    return R, t
 
 
 def register(model: MeshModel, table: CurvatureTable, geometry: LocalGeometry, points: np.ndarray, *,
@@ -207,20 +245,14 @@ def register(model: MeshModel, table: CurvatureTable, geometry: LocalGeometry, p
     """
     if curves is None:
         raise ValueError("mesh registration needs the data curves")
-    k1, k2, d1, fit_radius = curvature_field(model)
+    k1, k2, d1, _ = curvature_field(model)
     x = np.asarray(points, dtype=np.float64)
     radius = float(np.max(np.linalg.norm(x - geometry.contact, axis=1)))
     if radius > model.size:
         return Registration.rejection(model.name, "the touch is larger than the model")
     # 1. every vertex ranked by its curvature gap to the data, the best of each grid cell kept
-    dk1, dk2, direction = _data_curvatures(model, geometry, x, fit_radius)
-    gap = np.hypot(k1 - dk1, k2 - dk2)
-    order = np.argsort(gap, kind="stable")
-    cell = np.floor((model.vertices[order] - model.vertices.min(axis=0)) / (radius / spread)).astype(np.int64)
-    cell -= cell.min(axis=0)
-    span = cell.max(axis=0) + 1
-    _, first = np.unique((cell[:, 0] * span[1] + cell[:, 1]) * span[2] + cell[:, 2], return_index=True)
-    chosen = order if exhaustive else order[np.sort(first)][:candidates]
+    chosen, (dk1, dk2), direction = _candidates(model, geometry, x, radius, spread=spread,
+                                                count=None if exhaustive else candidates)
     # 2.-3. poses from the frames, a few cheap Gauss-Newton steps for each; each candidate's best rotation
     poses = [_cheap_poses(model, geometry, curves, chosen[i:i + CHUNK], k1, k2, d1, direction, radius,
                           umbilic=np.inf if exhaustive else umbilic / radius, dk=(dk1, dk2), tilt=tilt,
