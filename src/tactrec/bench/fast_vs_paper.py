@@ -223,7 +223,7 @@ def _plot(table, out: Path) -> Path:
     axes[0].set_xticks(range(len(protocols)), protocols)
     axes[0].set_ylabel("correct (%)")
     axes[0].set_ylim(0, 105)
-    axes[0].legend(loc="lower right", fontsize=8)
+    axes[0].legend(loc="upper right", fontsize=8)
     axes[1].set_yscale("log")
     axes[1].set_xticks(range(len(protocols)), protocols)
     axes[1].set_ylabel("seconds per recognition (10 models)")
