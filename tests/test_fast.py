@@ -10,6 +10,7 @@ from tactrec.errors import InputError
 from tactrec.estimation import estimate
 from tactrec.recognition import recognize
 from tactrec.registration import DEFAULT_METHOD, closedform_fast, mesh_fast
+from tactrec.registration.result import rotations_from_vectors
 from tactrec.simulation import simulate_random_touch, simulate_touch, spread_vertices
 from tactrec.surfaces import load_model
 from tactrec.tables import CurvatureTable
@@ -78,7 +79,7 @@ def test_gauss_newton_converges_from_a_perturbed_pose(scans):
     m = scans.get("pear").model
     touch = simulate_touch(m, [2023], points=81, spacing=0.3, angle=60.0, rng=1)
     R, t = np.array(touch.meta["truth"]["rotation"]), np.array(touch.meta["truth"]["translation"])
-    tilt = mesh_fast._rotations(np.array([[0.05, -0.04, 0.06]]))[0]         # about 5 degrees
+    tilt = rotations_from_vectors(np.array([[0.05, -0.04, 0.06]]))[0]         # about 5 degrees
     R0 = tilt @ R
     t0 = t + np.array([0.8, -0.5, 0.3])
     before = mesh_fast._mean_distance(m, R0[None], t0[None], touch.points)[0]

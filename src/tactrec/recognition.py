@@ -167,7 +167,7 @@ def recognize(data: TactileData, models: Iterable[ModelEntry], *, method: str = 
     models : iterable of ModelEntry
         Models with their lookup tables (see :mod:`tactrec.database`).
     method : str
-        Registration method (``"paper"``).
+        Registration method: ``"fast"`` (the default) or ``"paper"``.
     window, degree, curvature_method
         Passed to :func:`tactrec.estimation.estimate`.
     polish : int
@@ -186,6 +186,7 @@ def recognize(data: TactileData, models: Iterable[ModelEntry], *, method: str = 
     threads = default_threads() if threads is None else threads
     geom = estimate(data, window=window, degree=degree, method=curvature_method)
     models = list(models)
+
     def share(part: list[ModelEntry]) -> list[Registration]:
         out, bound = [], np.inf          # the best error so far in this share, in the data's units
         for entry in part:

@@ -23,8 +23,7 @@ from ..estimation import LocalGeometry
 from ..surfaces.closedform import ClosedFormSurface
 from ..tables import CurvatureTable
 from .closedform_paper import Superposition
-from .mesh_fast import _rotations
-from .result import Registration, local_frame, rotations_z
+from .result import Registration, local_frame, point_to_plane_step, rotations_z
 
 __all__ = ["register", "polish", "refine", "DEFAULTS"]
 
@@ -58,15 +57,7 @@ def refine(model: ClosedFormSurface, R: np.ndarray, t: np.ndarray, x: np.ndarray
         active[~np.isin(np.arange(len(active)), a)] = False
         if len(a) == 0:
             break
-        n = fg[..., 1:] / norm[..., None]
-        r = fg[..., 0] / norm
-        J = np.concatenate([np.cross(y, n), n], axis=2)
-        JtJ = np.einsum("hmi,hmj->hij", J, J)
-        damp = 1e-6 * (np.trace(JtJ, axis1=1, axis2=2)[:, None, None] / 6.0 + 1e-12)
-        step = np.linalg.solve(JtJ + damp * np.eye(6), -np.einsum("hmi,hm->hi", J, r)[..., None])[..., 0]
-        dR = _rotations(step[:, :3])
-        R[a] = dR @ R[a]
-        t[a] = np.einsum("hij,hj->hi", dR, t[a]) + step[:, 3:]
+        R[a], t[a], step = point_to_plane_step(R[a], t[a], y, fg[..., 1:] / norm[..., None], fg[..., 0] / norm)
         small = np.max(np.abs(step), axis=1) < 1e-12 * max(1.0, model.size)
         active[a[small]] = False
     y = np.einsum("hij,mj->hmi", R, x) + t[:, None, :]

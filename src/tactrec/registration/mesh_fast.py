@@ -15,8 +15,10 @@ rotation, this method
    direction means nothing, every 30 degrees about the normal instead;
 3. improves every pose by a few Gauss-Newton steps against the tangent plane
    of the nearest vertex (a k-d tree query: the cheap stand-in for the
-   distance to the mesh), keeps each candidate's best rotation and the best
-   ``refine`` candidates;
+   distance to the mesh; the exact closest points instead when the touch
+   spans fewer than ``exact_below`` mean edges, where vertex planes are too
+   coarse), keeps each candidate's best rotation and the best ``refine``
+   candidates;
 4. refines those in all six degrees of freedom by point-to-plane
    Gauss-Newton on the exact closest points (libigl's AABB tree), and the
    best ``final`` again on all data points.
@@ -36,7 +38,7 @@ import numpy as np
 from ..estimation import LocalGeometry
 from ..surfaces.mesh import MeshModel, quadric_curvatures
 from ..tables import CurvatureTable
-from .result import Registration, local_frame, rotations_z
+from .result import Registration, local_frame, point_to_plane_step, rotations_from_vectors, rotations_z
 
 __all__ = ["register", "polish", "refine", "prepare", "starting_poses", "DEFAULTS", "curvature_field"]
 
@@ -77,17 +79,6 @@ def _vertex_tree(model: MeshModel):
     return tree
 
 
-def _rotations(axis_angle: np.ndarray) -> np.ndarray:
-    """Rotation matrices ``(n, 3, 3)`` from rotation vectors ``(n, 3)`` (Rodrigues)."""
-    theta = np.linalg.norm(axis_angle, axis=1)
-    k = axis_angle / np.where(theta > 0, theta, 1.0)[:, None]
-    K = np.zeros((len(k), 3, 3))
-    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -k[:, 2], k[:, 1], -k[:, 0]
-    K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = k[:, 2], -k[:, 1], k[:, 0]
-    s, c = np.sin(theta)[:, None, None], np.cos(theta)[:, None, None]
-    return np.eye(3) + s * K + (1 - c) * (K @ K)
-
-
 def _moved(R: np.ndarray, t: np.ndarray, x: np.ndarray) -> np.ndarray:
     return np.einsum("hij,mj->hmi", R, x) + t[:, None, :]
 
@@ -121,15 +112,7 @@ def refine(model: MeshModel, R: np.ndarray, t: np.ndarray, x: np.ndarray, *, ite
             n, closest = model.face_normals[face].reshape(moved.shape), closest.reshape(moved.shape)
         else:
             closest, n = _nearest_planes(model, moved)
-        r = np.sum((moved - closest) * n, axis=2)                                   # (h, m)
-        J = np.concatenate([np.cross(moved, n), n], axis=2)                         # (h, m, 6)
-        JtJ = np.einsum("hmi,hmj->hij", J, J)
-        # Levenberg-Marquardt damping: a flat or cylindrical patch leaves directions unconstrained
-        damp = 1e-6 * (np.trace(JtJ, axis1=1, axis2=2)[:, None, None] / 6.0 + 1e-12)
-        step = np.linalg.solve(JtJ + damp * np.eye(6), -np.einsum("hmi,hm->hi", J, r)[..., None])[..., 0]
-        dR = _rotations(step[:, :3])
-        R = dR @ R
-        t = np.einsum("hij,hj->hi", dR, t) + step[:, 3:]
+        R, t, step = point_to_plane_step(R, t, moved, n, np.sum((moved - closest) * n, axis=2))
         if np.max(np.abs(step)) < 1e-10 * max(1.0, model.size):
             break
     if exact:
@@ -177,7 +160,7 @@ def _frame_poses(model, geometry, chosen, k1, k2, d1, direction, *, umbilic, dk,
     R = F[owner] @ rotations_z(np.concatenate(psis))
     if tilt > 0:
         a = np.deg2rad(tilt)
-        T = _rotations(np.array([[0, 0, 0], [a, 0, 0], [-a, 0, 0], [0, a, 0], [0, -a, 0]], dtype=float))
+        T = rotations_from_vectors(np.array([[0, 0, 0], [a, 0, 0], [-a, 0, 0], [0, a, 0], [0, -a, 0]], dtype=float))
         R = (R[:, None] @ T[None]).reshape(-1, 3, 3)
         owner = np.repeat(owner, len(T))
     R = R @ local_frame(geometry.normal, direction)

@@ -6,7 +6,7 @@ import dataclasses
 
 import numpy as np
 
-__all__ = ["Registration", "local_frame", "rotations_z"]
+__all__ = ["Registration", "local_frame", "rotations_z", "rotations_from_vectors", "point_to_plane_step"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -100,3 +100,34 @@ def rotations_z(phis: np.ndarray) -> np.ndarray:
     R = np.zeros((len(phis), 3, 3))
     R[:, 0, 0], R[:, 0, 1], R[:, 1, 0], R[:, 1, 1], R[:, 2, 2] = c, -s, s, c, 1.0
     return R
+
+
+def rotations_from_vectors(axis_angle: np.ndarray) -> np.ndarray:
+    """Rotation matrices ``(n, 3, 3)`` from rotation vectors ``(n, 3)`` (Rodrigues)."""
+    theta = np.linalg.norm(axis_angle, axis=1)
+    k = axis_angle / np.where(theta > 0, theta, 1.0)[:, None]
+    K = np.zeros((len(k), 3, 3))
+    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -k[:, 2], k[:, 1], -k[:, 0]
+    K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = k[:, 2], -k[:, 1], k[:, 0]
+    s, c = np.sin(theta)[:, None, None], np.cos(theta)[:, None, None]
+    return np.eye(3) + s * K + (1 - c) * (K @ K)
+
+
+def point_to_plane_step(R: np.ndarray, t: np.ndarray, moved: np.ndarray, normals: np.ndarray,
+                        residuals: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One damped Gauss-Newton (Levenberg-Marquardt) step on poses ``R (h, 3, 3), t (h, 3)``.
+
+    ``moved (h, m, 3)`` are the data points under the poses, ``normals (h, m, 3)``
+    the unit normals of the planes they are measured against and ``residuals
+    (h, m)`` their signed distances.  The step is a small rotation about the
+    origin and a translation, linearised as ``r + (y x n) . w + n . v``; the
+    damping keeps directions that a flat or cylindrical patch leaves
+    unconstrained from running away.  Returns the new poses and the steps
+    ``(h, 6)``.
+    """
+    J = np.concatenate([np.cross(moved, normals), normals], axis=2)                  # (h, m, 6)
+    JtJ = np.einsum("hmi,hmj->hij", J, J)
+    damp = 1e-6 * (np.trace(JtJ, axis1=1, axis2=2)[:, None, None] / 6.0 + 1e-12)
+    step = np.linalg.solve(JtJ + damp * np.eye(6), -np.einsum("hmi,hm->hi", J, residuals)[..., None])[..., 0]
+    dR = rotations_from_vectors(step[:, :3])
+    return dR @ R, np.einsum("hij,hj->hi", dR, t) + step[:, 3:], step
