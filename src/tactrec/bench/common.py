@@ -14,7 +14,8 @@ import numpy as np
 
 from ..io.atomic import write_text_atomic
 
-__all__ = ["paper_values", "instance_rng", "run_parallel", "write_json", "default_jobs"]
+__all__ = ["paper_values", "instance_rng", "run_parallel", "write_json", "default_jobs", "sources_hash",
+           "saved_record"]
 
 
 def paper_values() -> dict:
@@ -62,3 +63,33 @@ def _default(obj):
     if isinstance(obj, np.ndarray):
         return obj.tolist()
     raise TypeError(type(obj).__name__)
+
+
+def sources_hash(*relative: str) -> str:
+    """Hash of the package sources a saved record depends on (files, or folders of ``.py`` files,
+    relative to the package): a changed method invalidates the records of an interrupted run."""
+    import hashlib
+
+    root = Path(str(resources.files("tactrec")))
+    h = hashlib.sha256()
+    for rel in relative:
+        path = root / rel
+        for file in sorted(path.glob("*.py")) if path.is_dir() else [path]:
+            h.update(file.read_bytes())
+    return h.hexdigest()[:16]
+
+
+def saved_record(path: Path, compute: Callable[[], dict], *, accept: Callable[[dict], bool] = lambda saved: True
+                 ) -> dict:
+    """The record saved at ``path`` if there is one and ``accept`` takes it, else ``compute()``,
+    written there atomically (so an interrupted benchmark resumes where it stopped)."""
+    if path.exists():
+        try:
+            saved = json.loads(path.read_text(encoding="utf-8"))
+            if accept(saved):
+                return saved
+        except (ValueError, KeyError, TypeError):
+            pass
+    record = compute()
+    write_json(path, record)
+    return record

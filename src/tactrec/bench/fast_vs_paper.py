@@ -23,10 +23,7 @@ so an interrupted run resumes.
 
 from __future__ import annotations
 
-import hashlib
-import json
 import time
-from importlib import resources
 from pathlib import Path
 
 import numpy as np
@@ -37,7 +34,7 @@ from ..recognition import recognize
 from ..registration import mesh_fast
 from ..simulation import simulate_touch, spread_vertices
 from ..surfaces import BUILTIN_SETS
-from .common import instance_rng, run_parallel, write_json
+from .common import instance_rng, run_parallel, saved_record, sources_hash, write_json
 
 __all__ = ["run", "PROTOCOLS", "METHODS"]
 
@@ -112,32 +109,16 @@ def _touch(task):
 
 
 def _code_hash() -> str:
-    """Hash of the sources a record depends on: a changed method invalidates saved records."""
-    h = hashlib.sha256()
-    root = Path(str(resources.files("tactrec")))
-    paths = [root / name for name in ("estimation.py", "simulation.py", "tables.py", "recognition.py",
-                                      "bench/fast_vs_paper.py")]
-    for folder in ("surfaces", "registration"):
-        paths += sorted((root / folder).glob("*.py"))
-    for path in paths:
-        h.update(path.read_bytes())
-    return h.hexdigest()[:16]
+    """Hash of the sources a record depends on."""
+    return sources_hash("estimation.py", "simulation.py", "tables.py", "recognition.py", "bench/fast_vs_paper.py",
+                        "surfaces", "registration")
 
 
 def _touch_saved(job):
     task, folder = job
     models, m_index, instance, seed, protocol, methods = task
-    path = folder / f"{protocol}-{models[m_index]}-{instance}-s{seed}.json"
-    if path.exists():
-        try:
-            saved = json.loads(path.read_text(encoding="utf-8"))
-            if set(methods) <= set(saved["results"]):
-                return saved
-        except (ValueError, KeyError):
-            pass
-    record = _touch(task)
-    write_json(path, record)
-    return record
+    return saved_record(folder / f"{protocol}-{models[m_index]}-{instance}-s{seed}.json", lambda: _touch(task),
+                        accept=lambda saved: set(methods) <= set(saved["results"]))
 
 
 def _summary(records: list[dict], protocol: str, method: str) -> dict:

@@ -17,7 +17,6 @@ of their own.
 
 from __future__ import annotations
 
-import json
 import time
 from pathlib import Path
 
@@ -29,7 +28,7 @@ from ..estimation import estimate
 from ..registration import mesh_paper
 from ..simulation import simulate_touch, spread_vertices
 from ..surfaces import BUILTIN_SETS
-from .common import default_jobs, instance_rng, run_parallel, write_json
+from .common import default_jobs, instance_rng, run_parallel, saved_record, sources_hash, write_json
 
 __all__ = ["run_fig11", "SWEEPS", "DEFAULTS"]
 
@@ -142,34 +141,19 @@ def _task_key(task) -> str:
 
 
 def _code_hash() -> str:
-    """Hash of the sources a P3 record depends on: a changed method invalidates saved records."""
-    import hashlib
-    from importlib import resources
-
-    h = hashlib.sha256()
-    root = resources.files("tactrec")
-    for rel in ("estimation.py", "simulation.py", "tables.py", "surfaces/mesh.py", "registration/mesh_paper.py",
-                "bench/paper_fig11.py"):
-        h.update(root.joinpath(rel).read_bytes())
-    return h.hexdigest()[:16]
+    """Hash of the sources a P3 record depends on."""
+    return sources_hash("estimation.py", "simulation.py", "tables.py", "surfaces/mesh.py", "registration/mesh_paper.py",
+                        "bench/paper_fig11.py")
 
 
 def _touch_saved(job):
     """Run one task, or reuse its record from an interrupted run of the same code and settings."""
     task, folder = job
-    path = folder / f"{_task_key(task)}.json"
     models, _, _, seed, _, _, deltas = task
     settings = {"models": list(models), "seed": seed, "deltas": list(deltas)}
-    if path.exists():
-        try:
-            saved = json.loads(path.read_text(encoding="utf-8"))
-            if saved.get("settings") == settings:
-                return saved["record"]
-        except (ValueError, KeyError):
-            pass
-    record = _touch(task)
-    write_json(path, {"settings": settings, "record": record})
-    return record
+    saved = saved_record(folder / f"{_task_key(task)}.json", lambda: {"settings": settings, "record": _touch(task)},
+                         accept=lambda s: s.get("settings") == settings)
+    return saved["record"]
 
 
 def run_fig11(*, out, instances: int = 10, seed: int = 0, jobs: int | None = None, quiet: bool = False,

@@ -17,7 +17,6 @@ between their top-1 accuracies is what ranking and pruning cost.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -27,7 +26,7 @@ from ..recognition import recognize
 from ..registration import mesh_fast
 from ..simulation import simulate_touch, spread_vertices
 from ..surfaces import ycb_names
-from .common import instance_rng, run_parallel, write_json
+from .common import instance_rng, run_parallel, saved_record, write_json
 from .fast_vs_paper import _code_hash
 
 __all__ = ["run_scale", "run_exhaustive", "SIZES"]
@@ -93,14 +92,7 @@ def _exhaustive_task(task):
 
 def _saved(job):
     fn, task, path = job
-    if path.exists():
-        try:
-            return json.loads(path.read_text(encoding="utf-8"))
-        except ValueError:
-            pass
-    record = fn(task)
-    write_json(path, record)
-    return record
+    return saved_record(path, lambda: fn(task))
 
 
 def _folder(out: Path, name: str) -> Path:
