@@ -104,8 +104,10 @@ def _scaled(geom: LocalGeometry, scale: float) -> LocalGeometry:
 
 
 def register_on_model(entry: ModelEntry, data: TactileData, geom: LocalGeometry, *,
-                      method: str = DEFAULT_METHOD, **options) -> Registration:
-    """Register one touch on one model, trying both normals if not oriented."""
+                      method: str = DEFAULT_METHOD, bound: float = np.inf, **options) -> Registration:
+    """Register one touch on one model, trying both normals if not oriented.
+
+    ``bound`` is the best error found so far on other models, in the data's units."""
     model = entry.model
     scale = conversion(data.units, getattr(model, "units", None))
     points = data.points * scale
@@ -114,7 +116,7 @@ def register_on_model(entry: ModelEntry, data: TactileData, geom: LocalGeometry,
     orientations = [(1, geom)] if geom.oriented else [(1, geom), (-1, geom.flipped())]
     results = []
     for sign, g in orientations:
-        r = register(model, entry.table, _scaled(g, scale), points, curves=curves, **options)
+        r = register(model, entry.table, _scaled(g, scale), points, curves=curves, bound=bound * scale, **options)
         results.append(dataclasses.replace(r, normal_sign=sign, scale=scale))
     ok = [r for r in results if r.ok]
     if not ok:
@@ -190,8 +192,7 @@ def recognize(data: TactileData, models: Iterable[ModelEntry], *, method: str = 
     def share(part: list[ModelEntry]) -> list[Registration]:
         out, bound = [], np.inf          # the best error so far in this share, in the data's units
         for entry in part:
-            scale = conversion(data.units, getattr(entry.model, "units", None))
-            r = register_on_model(entry, data, geom, method=method, bound=bound * scale, **options)
+            r = register_on_model(entry, data, geom, method=method, bound=bound, **options)
             out.append(r)
             if r.ok:
                 bound = min(bound, r.error / r.scale)

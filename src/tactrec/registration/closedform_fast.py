@@ -23,7 +23,7 @@ from ..estimation import LocalGeometry
 from ..surfaces.closedform import ClosedFormSurface
 from ..tables import CurvatureTable
 from .closedform_paper import Superposition
-from .result import Registration, local_frame, point_to_plane_step, rotations_z
+from .result import Registration, apply_poses, local_frame, point_to_plane_step, rotations_z
 
 __all__ = ["register", "polish", "refine", "DEFAULTS"]
 
@@ -49,7 +49,7 @@ def refine(model: ClosedFormSurface, R: np.ndarray, t: np.ndarray, x: np.ndarray
         a = np.nonzero(active)[0]
         if len(a) == 0:
             break
-        y = np.einsum("hij,mj->hmi", R[a], x) + t[a, None, :]
+        y = apply_poses(R[a], t[a], x)
         fg = model.implicit(y, order=1)
         norm = np.linalg.norm(fg[..., 1:], axis=-1)
         ok = np.all(np.isfinite(fg), axis=(1, 2)) & np.all(norm > 0, axis=1)
@@ -60,7 +60,7 @@ def refine(model: ClosedFormSurface, R: np.ndarray, t: np.ndarray, x: np.ndarray
         R[a], t[a], step = point_to_plane_step(R[a], t[a], y, fg[..., 1:] / norm[..., None], fg[..., 0] / norm)
         small = np.max(np.abs(step), axis=1) < 1e-12 * max(1.0, model.size)
         active[a[small]] = False
-    y = np.einsum("hij,mj->hmi", R, x) + t[:, None, :]
+    y = apply_poses(R, t, x)
     with np.errstate(all="ignore"):
         error = np.mean(model.distance(y), axis=1)
     return R, t, np.where(np.isfinite(error), error, np.inf)

@@ -38,7 +38,8 @@ import numpy as np
 from ..estimation import LocalGeometry
 from ..surfaces.mesh import MeshModel, quadric_curvatures
 from ..tables import CurvatureTable
-from .result import Registration, local_frame, point_to_plane_step, rotations_from_vectors, rotations_z
+from .result import (Registration, apply_poses, local_frame, point_to_plane_step, rotations_from_vectors,
+                     rotations_z)
 
 __all__ = ["register", "polish", "refine", "prepare", "starting_poses", "DEFAULTS", "curvature_field"]
 
@@ -66,31 +67,18 @@ def curvature_field(model: MeshModel) -> tuple[np.ndarray, np.ndarray, np.ndarra
 def prepare(model: MeshModel) -> None:
     """Build what registration needs once per model (curvature field, k-d tree, AABB tree)."""
     curvature_field(model)
-    _vertex_tree(model)
+    model.vertex_tree
     model.distance(model.vertices[:1])
-
-
-def _vertex_tree(model: MeshModel):
-    tree = model.__dict__.get("_fast_vertex_tree")
-    if tree is None:
-        from scipy.spatial import cKDTree
-
-        tree = model.__dict__["_fast_vertex_tree"] = cKDTree(model.vertices)
-    return tree
-
-
-def _moved(R: np.ndarray, t: np.ndarray, x: np.ndarray) -> np.ndarray:
-    return np.einsum("hij,mj->hmi", R, x) + t[:, None, :]
 
 
 def _mean_distance(model: MeshModel, R: np.ndarray, t: np.ndarray, x: np.ndarray) -> np.ndarray:
     """Exact mean distance to the mesh of ``x (m, 3)`` under each pose ``R (h, 3, 3), t (h, 3)``."""
-    return model.distance(_moved(R, t, x).reshape(-1, 3)).reshape(len(R), -1).mean(axis=1)
+    return model.distance(apply_poses(R, t, x).reshape(-1, 3)).reshape(len(R), -1).mean(axis=1)
 
 
 def _nearest_planes(model: MeshModel, moved: np.ndarray):
     """The nearest vertex's position and normal for every point of ``moved (..., 3)``."""
-    _, v = _vertex_tree(model).query(moved.reshape(-1, 3))
+    _, v = model.vertex_tree.query(moved.reshape(-1, 3))
     v = v.reshape(moved.shape[:-1])
     return model.vertices[v], model.vertex_normals[v]
 
@@ -106,7 +94,7 @@ def refine(model: MeshModel, R: np.ndarray, t: np.ndarray, x: np.ndarray, *, ite
     """
     R, t = R.copy(), t.copy()
     for _ in range(iterations):
-        moved = _moved(R, t, x)                                                      # (h, m, 3)
+        moved = apply_poses(R, t, x)                                                      # (h, m, 3)
         if exact:
             _, face, closest = model.closest_points(moved.reshape(-1, 3))
             n, closest = model.face_normals[face].reshape(moved.shape), closest.reshape(moved.shape)
@@ -117,7 +105,7 @@ def refine(model: MeshModel, R: np.ndarray, t: np.ndarray, x: np.ndarray, *, ite
             break
     if exact:
         return R, t, _mean_distance(model, R, t, x)
-    moved = _moved(R, t, x)
+    moved = apply_poses(R, t, x)
     closest, n = _nearest_planes(model, moved)
     return R, t, np.abs(np.sum((moved - closest) * n, axis=2)).mean(axis=1)
 

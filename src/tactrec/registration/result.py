@@ -6,7 +6,8 @@ import dataclasses
 
 import numpy as np
 
-__all__ = ["Registration", "local_frame", "rotations_z", "rotations_from_vectors", "point_to_plane_step"]
+__all__ = ["Registration", "local_frame", "rotations_z", "rotations_from_vectors", "point_to_plane_step",
+           "apply_poses"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -111,6 +112,11 @@ def rotations_from_vectors(axis_angle: np.ndarray) -> np.ndarray:
     K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = k[:, 2], -k[:, 1], k[:, 0]
     s, c = np.sin(theta)[:, None, None], np.cos(theta)[:, None, None]
     return np.eye(3) + s * K + (1 - c) * (K @ K)
+
+
+def apply_poses(R: np.ndarray, t: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Points ``x (m, 3)`` under each pose ``R (h, 3, 3), t (h, 3)``: ``(h, m, 3)``."""
+    return np.einsum("hij,mj->hmi", R, x) + t[:, None, :]
 
 
 def point_to_plane_step(R: np.ndarray, t: np.ndarray, moved: np.ndarray, normals: np.ndarray,

@@ -302,11 +302,9 @@ class MeshModel(SurfaceModel):
         other side is left out; all vertices at once.  Returns ``k1, k2 (V,)``
         (``k1 >= k2``, outward normals) and ``d1 (V, 3)``, a unit tangent.
         """
-        from scipy.spatial import cKDTree
-
         radius = 3.0 * self.mean_edge if radius is None else float(radius)
         count = min(most, len(self.vertices))
-        dist, idx = cKDTree(self.vertices).query(self.vertices, k=count)
+        dist, idx = self.vertex_tree.query(self.vertices, k=count)
         frames = self.vertex_frames(np.arange(len(self.vertices)))                     # (V, 3, 3) [t1 t2 n]
         local = np.einsum("vkj,vji->vki", self.vertices[idx] - self.vertices[:, None, :], frames)
         agree = np.einsum("vkj,vj->vk", self.vertex_normals[idx], self.vertex_normals) > 0.5
@@ -315,6 +313,13 @@ class MeshModel(SurfaceModel):
         t1, t2, n = frames[:, :, 0], frames[:, :, 1], frames[:, :, 2]
         d1 = u[:, None] * t1 + v[:, None] * t2 + 0.0 * n
         return k1, k2, _unit_rows(d1)
+
+    @cached_property
+    def vertex_tree(self):
+        """A k-d tree (scipy ``cKDTree``) over the vertices."""
+        from scipy.spatial import cKDTree
+
+        return cKDTree(self.vertices)
 
     @cached_property
     def fine_curvatures(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
