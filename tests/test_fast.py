@@ -4,6 +4,7 @@ recognition among YCB scans, and agreement with the ``paper`` method."""
 import numpy as np
 import pytest
 
+from tactrec import recognition
 from tactrec.bench.common import instance_rng
 from tactrec.database import build_database, build_entries, load_database
 from tactrec.errors import InputError
@@ -103,10 +104,11 @@ def test_fast_recognises_p3_touches(scans):
             assert entry.model.distance(reg.location[None])[0] < 1e-6
 
 
-def test_threads_do_not_change_the_result(scans):
+def test_worker_processes_do_not_change_the_result(scans):
     touch = simulate_touch(scans.get("mug").model, [2000], points=61, spacing=0.3, angle=45.0, rng=4)
-    one = recognize(touch, scans, threads=1)
-    two = recognize(touch, scans, threads=2)
+    one = recognize(touch, scans, workers=1)
+    two = recognize(touch, scans, workers=2)
+    assert recognition._POOL.get("pool") is not None            # the shares did run in worker processes
     assert [(r.model, r.error) for r in one.ranking] == [(r.model, r.error) for r in two.ranking]
 
 

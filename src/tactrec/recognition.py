@@ -10,16 +10,17 @@ the smallest error is recognised (eq. 9).  When the touch carries no
 from __future__ import annotations
 
 import dataclasses
+import multiprocessing
 import os
 import time
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ProcessPoolExecutor
 from typing import Iterable
 
 import numpy as np
 
 from .estimation import LocalGeometry, estimate, noise_level
 from .io.touch import TactileData
-from .registration import DEFAULT_METHOD, Registration, get_polisher, get_registrar
+from .registration import DEFAULT_METHOD, Registration, get_polisher, get_promise, get_registrar
 from .tables import CurvatureTable
 from .units import conversion
 
@@ -130,8 +131,8 @@ def register_on_model(entry: ModelEntry, data: TactileData, geom: LocalGeometry,
 SHARES = 2
 
 
-def default_threads() -> int:
-    """Threads for a recognition: two where the machine has them."""
+def default_workers() -> int:
+    """Worker processes for a recognition: two where the machine has them."""
     return max(1, min(2, os.cpu_count() or 1))
 
 
@@ -158,9 +159,59 @@ def _polished(ranking: list[Registration], models: list[ModelEntry], data: Tacti
     return out
 
 
+def _share(part, data, geom, method, options) -> list[Registration]:
+    """Register on the models of one share in order, each bounded by the best error before it."""
+    out, bound = [], np.inf          # the best error so far in this share, in the data's units
+    for entry in part:
+        r = register_on_model(entry, data, geom, method=method, bound=bound, **options)
+        out.append(r)
+        if r.ok:
+            bound = min(bound, r.error / r.scale)
+    return out
+
+
+#: the worker processes and the models they were forked with (held, so their ids stay unique)
+_POOL: dict = {}
+
+
+def _share_job(indices, data, geom, method, options) -> list[Registration]:
+    """One share, in a worker process: the models are the ones it was forked with."""
+    models = _POOL["models"]
+    return _share([models[i] for i in indices], data, geom, method, options)
+
+
+def _promise(entry: ModelEntry, data: TactileData, geom: LocalGeometry, method: str) -> float:
+    """The method's promise of the model for this touch (lower first; inf without one)."""
+    promise = get_promise(method, entry.model.kind)
+    if promise is None:
+        return np.inf
+    scale = conversion(data.units, getattr(entry.model, "units", None))
+    orientations = [geom] if geom.oriented else [geom, geom.flipped()]
+    return min(promise(entry.model, _scaled(g, scale), data.points * scale) for g in orientations)
+
+
+def _workers(models: list[ModelEntry], workers: int) -> ProcessPoolExecutor | None:
+    """Worker processes forked with ``models``, kept for the next recognition against the same
+    models; ``None`` where processes cannot be forked (then the shares run one after the other).
+
+    Processes, not threads: the exact closest-point queries hold Python's global lock."""
+    workers = min(int(workers), SHARES)
+    key = (tuple(id(e) for e in models), workers)
+    if _POOL.get("key") == key:
+        return _POOL["pool"]
+    if _POOL.get("pool") is not None:
+        _POOL["pool"].shutdown()
+    _POOL.clear()
+    if workers < 2 or multiprocessing.current_process().daemon or "fork" not in multiprocessing.get_all_start_methods():
+        return None
+    pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork"))
+    _POOL.update(key=key, models=models, pool=pool)
+    return pool
+
+
 def recognize(data: TactileData, models: Iterable[ModelEntry], *, method: str = DEFAULT_METHOD,
               window: int | str | None = "auto", degree: int = 3, curvature_method: str = "auto",
-              polish: int = 3, threads: int | None = None, **options) -> Recognition:
+              polish: int = 3, workers: int | None = None, **options) -> Recognition:
     """Recognise a touch against ``models`` (Section 3.3).
 
     Parameters
@@ -175,37 +226,33 @@ def recognize(data: TactileData, models: Iterable[ModelEntry], *, method: str = 
     polish : int
         How many of the best models get the method's final refinement (if it
         has one: ``fast``).
-    threads : int, optional
-        Models registered in parallel (default: up to two, the cores of a
-        small machine).  The models are dealt into :data:`SHARES` fixed
-        shares, so the result depends neither on this nor on scheduling.
+    workers : int, optional
+        Processes registering models in parallel (default: up to two, the
+        cores of a small machine; forked once and kept for later touches
+        against the same models).  The models are ordered by the method's
+        promise for the touch (``fast``: the best curvature match), then
+        dealt into :data:`SHARES` fixed shares, so the result depends
+        neither on this nor on scheduling.
     **options
         Passed to the registration (e.g. ``delta``).  Each model after the
-        first also gets ``bound``, the best error so far, which ``fast`` uses
-        to skip hopeless models early.
+        first of its share also gets ``bound``, the best error so far in the
+        share, which ``fast`` uses to skip hopeless models early.
     """
     start = time.perf_counter()
-    threads = default_threads() if threads is None else threads
+    workers = default_workers() if workers is None else int(workers)
     geom = estimate(data, window=window, degree=degree, method=curvature_method)
     models = list(models)
 
-    def share(part: list[ModelEntry]) -> list[Registration]:
-        out, bound = [], np.inf          # the best error so far in this share, in the data's units
-        for entry in part:
-            r = register_on_model(entry, data, geom, method=method, bound=bound, **options)
-            out.append(r)
-            if r.ok:
-                bound = min(bound, r.error / r.scale)
-        return out
-
-    # fixed shares (every SHARES-th model), each with its own bound: the same result whatever the
-    # number of threads and however they are scheduled
-    parts = [models[i::SHARES] for i in range(SHARES)]
-    if int(threads) > 1:
-        with ThreadPoolExecutor(max_workers=min(int(threads), SHARES)) as pool:
-            ranking = [r for part in pool.map(share, parts) for r in part]
+    # the most promising models first, dealt into fixed shares (every SHARES-th), each with its own
+    # bound: the same result whatever the number of workers and however they are scheduled
+    order = sorted(range(len(models)), key=lambda i: (_promise(models[i], data, geom, method), i))
+    shares = [order[k::SHARES] for k in range(SHARES)]
+    pool = _workers(models, workers)
+    if pool is not None:
+        jobs = [pool.submit(_share_job, share, data, geom, method, options) for share in shares]
+        ranking = [r for job in jobs for r in job.result()]
     else:
-        ranking = [r for part in parts for r in share(part)]
+        ranking = [r for share in shares for r in _share([models[i] for i in share], data, geom, method, options)]
     ranking.sort(key=_rank_key)
     ranking = _polished(ranking, models, data, geom, method, polish)
     ranking.sort(key=_rank_key)

@@ -19,7 +19,7 @@ from ..errors import InputError
 from . import closedform_fast, closedform_paper, mesh_fast, mesh_paper
 from .result import Registration, local_frame
 
-__all__ = ["METHODS", "DEFAULT_METHOD", "Registration", "local_frame", "get_registrar", "get_polisher", "method_defaults"]
+__all__ = ["METHODS", "DEFAULT_METHOD", "Registration", "local_frame", "get_registrar", "get_polisher", "get_promise", "method_defaults"]
 
 METHODS: dict[str, dict[str, Callable[..., Registration]]] = {
     "paper": {"closed-form": closedform_paper.register, "mesh": mesh_paper.register},
@@ -29,6 +29,12 @@ METHODS: dict[str, dict[str, Callable[..., Registration]]] = {
 #: per method and model kind, the optional refinement of a finished registration
 POLISHERS: dict[str, dict[str, Callable[..., Registration]]] = {
     "fast": {"closed-form": closedform_fast.polish, "mesh": mesh_fast.polish},
+}
+
+#: per method and model kind, the optional ``promise(model, geometry, points) -> float`` (lower is
+#: more promising) by which recognition orders the models
+PROMISES: dict[str, dict[str, Callable[..., float]]] = {
+    "fast": {"mesh": mesh_fast.promise},
 }
 
 #: per method and model kind, the default options (e.g. the lookup tolerance)
@@ -54,6 +60,11 @@ def get_registrar(method: str, kind: str) -> Callable[..., Registration]:
 def get_polisher(method: str, kind: str) -> Callable[..., Registration] | None:
     """``method``'s refinement of a finished registration on ``kind`` models, if it has one."""
     return POLISHERS.get(method, {}).get(kind)
+
+
+def get_promise(method: str, kind: str) -> Callable[..., float] | None:
+    """``method``'s measure of how promising a model of ``kind`` is for a touch, if it has one."""
+    return PROMISES.get(method, {}).get(kind)
 
 
 def method_defaults(method: str, kind: str) -> dict:

@@ -46,16 +46,18 @@ __all__ = ["register", "polish", "refine", "prepare", "starting_poses", "DEFAULT
 DEFAULTS = {
     "candidates": 150,      # distinct places kept after ranking every vertex by curvature
     "spread": 4.0,          # at most one candidate per cell of (touch radius / spread)
-    "coarse_points": 8,     # data points per curve in the cheap stages
-    "coarse_iterations": 2,  # Gauss-Newton steps on vertex planes, every pose
+    "coarse_points": 5,     # data points per curve in the cheap stages
+    "coarse_iterations": 2,  # Gauss-Newton steps on vertex planes
+    "screen": 40,           # poses kept for the second cheap step, by the first step's predicted fit
     "refine": 16,           # candidates refined on the exact surface
     "iterations": 10,
     "final": 3,             # poses refined again with all data points
     "final_iterations": 10,
     "umbilic": 0.05,        # |k1 - k2| x touch radius below this: scan the rotation instead
-    "prune": 4.0,           # skip a model whose best cheap score exceeds prune x bound
+    "prune": 2.0,           # skip a model whose best cheap score exceeds prune x bound
     "hard": 0.01,           # polish: search again when the error exceeds this x touch radius
     "exact_below": 4.0,     # a touch under this many mean edges in radius: exact distances from the start
+    "tolerance": 1e-5,      # Gauss-Newton stops when no point moves more than this x the touch's reach
 }
 
 
@@ -84,15 +86,22 @@ def _nearest_planes(model: MeshModel, moved: np.ndarray):
 
 
 def refine(model: MeshModel, R: np.ndarray, t: np.ndarray, x: np.ndarray, *, iterations: int,
-           exact: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+           exact: bool = True, predict: bool = False,
+           tolerance: float = DEFAULTS["tolerance"]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Point-to-plane Gauss-Newton (damped) on poses ``R (h, 3, 3), t (h, 3)`` of data ``x (m, 3)``.
 
     Each step linearises ``r_i = (R x_i + t - c_i) . n_i`` about the current
     pose, with ``c_i, n_i`` the closest point on the mesh and its face normal
-    (``exact``) or the nearest vertex and its normal.  Returns the poses and
-    their mean distances ``(h,)`` (exact or to those planes).
+    (``exact``) or the nearest vertex and its normal.  The steps stop early
+    once no data point moves by more than ``tolerance`` x the data's reach
+    (its largest distance from its centroid).  Returns the poses and their
+    mean distances ``(h,)`` (exact or to those planes); with ``predict``, the
+    distances the last step's linearisation predicts, which spares a last
+    query of every point.
     """
     R, t = R.copy(), t.copy()
+    predicted = None
+    reach = float(np.max(np.linalg.norm(x - x.mean(axis=0), axis=1)))
     for _ in range(iterations):
         moved = apply_poses(R, t, x)                                                      # (h, m, 3)
         if exact:
@@ -100,9 +109,15 @@ def refine(model: MeshModel, R: np.ndarray, t: np.ndarray, x: np.ndarray, *, ite
             n, closest = model.face_normals[face].reshape(moved.shape), closest.reshape(moved.shape)
         else:
             closest, n = _nearest_planes(model, moved)
-        R, t, step = point_to_plane_step(R, t, moved, n, np.sum((moved - closest) * n, axis=2))
-        if np.max(np.abs(step)) < 1e-10 * max(1.0, model.size):
+        residual = np.sum((moved - closest) * n, axis=2)
+        R, t, step = point_to_plane_step(R, t, moved, n, residual)
+        if predict:
+            predicted = residual + np.sum(np.cross(moved, n) * step[:, None, :3] + n * step[:, None, 3:], axis=2)
+        moves = np.linalg.norm(step[:, :3], axis=1) * reach + np.linalg.norm(step[:, 3:], axis=1)
+        if np.max(moves) <= tolerance * reach:
             break
+    if predicted is not None:
+        return R, t, np.abs(predicted).mean(axis=1)
     if exact:
         return R, t, _mean_distance(model, R, t, x)
     moved = apply_poses(R, t, x)
@@ -157,11 +172,21 @@ def _frame_poses(model, geometry, chosen, k1, k2, d1, direction, *, umbilic, dk,
 
 
 def _cheap_poses(model, geometry, curves, chosen, k1, k2, d1, direction, radius, *, umbilic, dk, tilt,
-                 coarse_points, coarse_iterations, exact):
+                 coarse_points, coarse_iterations, exact, screen):
     """Steps 2-3 for the candidate vertices ``chosen (c,)``: each one's best pose ``R (c, 3, 3), t (c, 3)``
-    after the cheap Gauss-Newton steps, and its cheap score ``(c,)``."""
+    after the cheap Gauss-Newton steps, and its cheap score ``(c,)``.
+
+    With ``screen``, only the ``screen`` poses whose first step predicts the best fit take the
+    further steps; the others are dropped."""
     R, t, owner = _frame_poses(model, geometry, chosen, k1, k2, d1, direction, umbilic=umbilic, dk=dk, tilt=tilt)
-    R, t, cheap = refine(model, R, t, _subset(curves, coarse_points), iterations=coarse_iterations, exact=exact)
+    x = _subset(curves, coarse_points)
+    if screen and len(R) > screen and coarse_iterations > 1:
+        R, t, first = refine(model, R, t, x, iterations=1, exact=exact, predict=True)
+        keep = np.argsort(first, kind="stable")[:screen]
+        owner = owner[keep]
+        R, t, cheap = refine(model, R[keep], t[keep], x, iterations=coarse_iterations - 1, exact=exact)
+    else:
+        R, t, cheap = refine(model, R, t, x, iterations=coarse_iterations, exact=exact)
     order = np.lexsort((cheap, owner))
     best = order[np.r_[True, owner[order][1:] != owner[order][:-1]]]             # one per candidate, in order
     return R[best], t[best], cheap[best]
@@ -174,14 +199,30 @@ def _candidates(model: MeshModel, geometry: LocalGeometry, x: np.ndarray, radius
     Returns the chosen vertices, the data's curvatures ``(k1, k2)`` and first principal direction."""
     k1, k2, _, fit_radius = curvature_field(model)
     dk1, dk2, direction = _data_curvatures(model, geometry, x, fit_radius)
-    order = np.argsort(np.hypot(k1 - dk1, k2 - dk2), kind="stable")
+    gap = np.hypot(k1 - dk1, k2 - dk2)
     if count is None:
-        return order, (dk1, dk2), direction
-    cell = np.floor((model.vertices[order] - model.vertices.min(axis=0)) / (radius / spread)).astype(np.int64)
-    cell -= cell.min(axis=0)
-    span = cell.max(axis=0) + 1
-    _, first = np.unique((cell[:, 0] * span[1] + cell[:, 1]) * span[2] + cell[:, 2], return_index=True)
+        return np.argsort(gap, kind="stable"), (dk1, dk2), direction
+    low, size = model.vertices.min(axis=0), radius / spread
+    span = np.floor((model.vertices.max(axis=0) - low) / size).astype(np.int64) + 1
+    for head in (20 * count, len(gap)):      # the best-ranked vertices usually hold enough distinct cells
+        order = np.argpartition(gap, head)[:head] if head < len(gap) else np.arange(len(gap))
+        order = order[np.lexsort((order, gap[order]))]
+        cell = np.floor((model.vertices[order] - low) / size).astype(np.int64)
+        _, first = np.unique((cell[:, 0] * span[1] + cell[:, 1]) * span[2] + cell[:, 2], return_index=True)
+        if len(first) >= count:
+            break
     return order[np.sort(first)][:count], (dk1, dk2), direction
+
+
+def promise(model: MeshModel, geometry: LocalGeometry, points: np.ndarray) -> float:
+    """How well the model's curvatures can match the data's: the smallest curvature gap over its
+    vertices times the touch's radius (lower is more promising).  Models are registered in this
+    order, so the bound that prunes later models tightens early."""
+    k1, k2, _, fit_radius = curvature_field(model)
+    x = np.asarray(points, dtype=np.float64)
+    radius = float(np.max(np.linalg.norm(x - geometry.contact, axis=1)))
+    dk1, dk2, _ = _data_curvatures(model, geometry, x, fit_radius)
+    return float(np.min(np.hypot(k1 - dk1, k2 - dk2)) * radius)
 
 
 def starting_poses(model: MeshModel, geometry: LocalGeometry, points: np.ndarray, *,
@@ -205,6 +246,7 @@ def register(model: MeshModel, table: CurvatureTable, geometry: LocalGeometry, p
              iterations: int = DEFAULTS["iterations"], final: int = DEFAULTS["final"],
              final_iterations: int = DEFAULTS["final_iterations"], umbilic: float = DEFAULTS["umbilic"],
                       prune: float = DEFAULTS["prune"], exact_below: float = DEFAULTS["exact_below"], tilt: float = 0.0,
+             screen: int = DEFAULTS["screen"], tolerance: float = DEFAULTS["tolerance"],
              exhaustive: bool = False, **_ignored) -> Registration:
     """Register the data curves onto ``model`` (steps 1-4 of the module text).
 
@@ -228,7 +270,7 @@ def register(model: MeshModel, table: CurvatureTable, geometry: LocalGeometry, p
     poses = [_cheap_poses(model, geometry, curves, chosen[i:i + CHUNK], k1, k2, d1, direction, radius,
                           umbilic=np.inf if exhaustive else umbilic / radius, dk=(dk1, dk2), tilt=tilt,
                           coarse_points=coarse_points, coarse_iterations=coarse_iterations,
-                          exact=radius < exact_below * model.mean_edge)
+                          exact=radius < exact_below * model.mean_edge, screen=0 if exhaustive else screen)
              for i in range(0, len(chosen), CHUNK)]
     R = np.concatenate([p[0] for p in poses])
     t = np.concatenate([p[1] for p in poses])
@@ -239,9 +281,10 @@ def register(model: MeshModel, table: CurvatureTable, geometry: LocalGeometry, p
         if len(keep) == 0:
             return Registration.rejection(model.name, f"pruned: no pose came near the best error {bound:.3g}")
     # 4. six degrees of freedom on the exact surface, then all points for the best few
-    R, t, error = refine(model, R[keep], t[keep], _subset(curves, 3 * coarse_points), iterations=iterations)
+    R, t, error = refine(model, R[keep], t[keep], _subset(curves, 3 * coarse_points), iterations=iterations,
+                         tolerance=tolerance)
     best = np.argsort(error)[:final]
-    R, t, error = refine(model, R[best], t[best], x, iterations=final_iterations)
+    R, t, error = refine(model, R[best], t[best], x, iterations=final_iterations, tolerance=tolerance)
     b = int(np.argmin(error))
     return _result(model, geometry, R[b], t[b], error[b], len(chosen))
 
@@ -255,8 +298,9 @@ def polish(model: MeshModel, registration: Registration, geometry: LocalGeometry
     fits better than ``hard`` x the touch's radius (a touch across a crease,
     where the estimated normal can be tens of degrees off), search again more
     widely: every 30 degrees about the normal at every candidate, the normal
-    tilted 15 degrees four ways, twice the cheap steps (on the smoother
-    vertex planes) and twice the poses refined."""
+    tilted 15 degrees four ways, eight points a curve and twice the cheap
+    steps (on the smoother vertex planes), no screening, and twice the poses
+    refined."""
     x = np.asarray(points, dtype=np.float64)
     R, t, error = refine(model, registration.rotation[None], registration.translation[None], x,
                          iterations=iterations)
@@ -264,10 +308,10 @@ def polish(model: MeshModel, registration: Registration, geometry: LocalGeometry
     if error[0] < registration.error:
         out = _result(model, geometry, R[0], t[0], error[0], registration.candidates)
     radius = float(np.max(np.linalg.norm(x - geometry.contact, axis=1)))
-    if curves is not None and table is not None and min(best, registration.error) > hard * radius:
+    if curves is not None and table is not None and min(best, out.error) > hard * radius:
         wide = register(model, table, geometry, x, curves=curves, umbilic=np.inf, tilt=15.0, exact_below=0.0,
-                        coarse_iterations=2 * DEFAULTS["coarse_iterations"],
-                        refine_poses=2 * DEFAULTS["refine"])
+                        coarse_points=8, coarse_iterations=2 * DEFAULTS["coarse_iterations"],
+                        refine_poses=2 * DEFAULTS["refine"], screen=0)
         if wide.ok and wide.error < out.error:
             out = wide
     return out

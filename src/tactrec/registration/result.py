@@ -116,7 +116,7 @@ def rotations_from_vectors(axis_angle: np.ndarray) -> np.ndarray:
 
 def apply_poses(R: np.ndarray, t: np.ndarray, x: np.ndarray) -> np.ndarray:
     """Points ``x (m, 3)`` under each pose ``R (h, 3, 3), t (h, 3)``: ``(h, m, 3)``."""
-    return np.einsum("hij,mj->hmi", R, x) + t[:, None, :]
+    return np.matmul(x, np.swapaxes(R, 1, 2)) + t[:, None, :]
 
 
 def point_to_plane_step(R: np.ndarray, t: np.ndarray, moved: np.ndarray, normals: np.ndarray,
@@ -131,9 +131,15 @@ def point_to_plane_step(R: np.ndarray, t: np.ndarray, moved: np.ndarray, normals
     unconstrained from running away.  Returns the new poses and the steps
     ``(h, 6)``.
     """
-    J = np.concatenate([np.cross(moved, normals), normals], axis=2)                  # (h, m, 6)
-    JtJ = np.einsum("hmi,hmj->hij", J, J)
+    J = np.empty(moved.shape[:2] + (6,))                                              # (h, m, 6)
+    y, n = moved, normals
+    J[..., 0] = y[..., 1] * n[..., 2] - y[..., 2] * n[..., 1]                         # y x n
+    J[..., 1] = y[..., 2] * n[..., 0] - y[..., 0] * n[..., 2]
+    J[..., 2] = y[..., 0] * n[..., 1] - y[..., 1] * n[..., 0]
+    J[..., 3:] = n
+    Jt = np.swapaxes(J, 1, 2)
+    JtJ = Jt @ J
     damp = 1e-6 * (np.trace(JtJ, axis1=1, axis2=2)[:, None, None] / 6.0 + 1e-12)
-    step = np.linalg.solve(JtJ + damp * np.eye(6), -np.einsum("hmi,hm->hi", J, residuals)[..., None])[..., 0]
+    step = np.linalg.solve(JtJ + damp * np.eye(6), -(Jt @ residuals[..., None]))[..., 0]
     dR = rotations_from_vectors(step[:, :3])
     return dR @ R, np.einsum("hij,hj->hi", dR, t) + step[:, 3:], step
