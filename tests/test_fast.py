@@ -208,3 +208,35 @@ def test_starting_poses_put_the_contact_on_candidate_vertices(scans):
     contacts = np.einsum("hij,j->hi", R, geom.contact) + t
     assert np.max(m.distance(contacts)) < 1e-9                      # each start sits on a vertex
     assert np.allclose(np.einsum("hji,hjk->hik", R, R), np.eye(3), atol=1e-9)
+
+
+def test_fit_limit_classifies_each_touch(tmp_path):
+    """Noise-free P3 touches: the refined true pose fits to ~0, and every record is classified."""
+    from tactrec.bench import fit_limit
+
+    table = fit_limit.run(out=tmp_path, instances=1, models=("banana", "pear"), protocols=("p3",), quiet=True)
+    rows = table["records"]
+    assert len(rows) == 2 and all(r["kind"] in ("correct", "outfitted", "search miss") for r in rows)
+    assert all(r["truth_error"] < 1e-3 for r in rows)
+    for r in rows:
+        assert (r["kind"] == "correct") == r["correct"]
+        if r["kind"] == "outfitted":
+            assert r["best_other"] < min(r["truth_error"], r["own_error"] or np.inf)
+    s = table["summary"]["p3"]
+    assert s["success_percent"] + s["outfitted_percent"] + s["search_miss_percent"] == pytest.approx(100.0)
+    assert (tmp_path / "fit-limit.json").exists() and "ceiling" in table["text"]
+
+
+def test_wider_search_rescues_a_touch_across_a_crease():
+    """At this strawberry vertex the estimated normal is far off: the first search fits nothing,
+    and the wider search (tilted normals, every 30 degrees) finds the true pose."""
+    entry = build_entries(["strawberry"]).get("strawberry")
+    touch = simulate_touch(entry.model, [6915], points=81, spacing=0.3, angle=60.0, rng=instance_rng(0, 3, 5))
+    geom = estimate(touch)
+    first = mesh_fast.register(entry.model, entry.table, geom, touch.points, curves=touch.curves)
+    assert mesh_fast.needs_rescue(first.error, geom, touch.points)
+    wide = mesh_fast.rescue(entry.model, entry.table, geom, touch.points, curves=touch.curves, bound=first.error)
+    assert wide.ok and wide.error < 1e-3 < first.error
+    assert np.linalg.norm(wide.location - touch.meta["truth"]["contact"]) < 0.05
+    fitted = mesh_fast.rescue(entry.model, entry.table, geom, touch.points, curves=touch.curves, bound=wide.error)
+    assert not fitted.ok and "fits already" in fitted.rejected

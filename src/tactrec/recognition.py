@@ -20,7 +20,7 @@ import numpy as np
 
 from .estimation import LocalGeometry, estimate, noise_level
 from .io.touch import TactileData
-from .registration import DEFAULT_METHOD, Registration, get_polisher, get_promise, get_registrar
+from .registration import DEFAULT_METHOD, Registration, get_polisher, get_promise, get_registrar, get_rescuer
 from .tables import CurvatureTable
 from .units import conversion
 
@@ -109,11 +109,16 @@ def register_on_model(entry: ModelEntry, data: TactileData, geom: LocalGeometry,
     """Register one touch on one model, trying both normals if not oriented.
 
     ``bound`` is the best error found so far on other models, in the data's units."""
+    return _on_model(get_registrar(method, entry.model.kind), entry, data, geom, bound=bound, **options)
+
+
+def _on_model(register, entry: ModelEntry, data: TactileData, geom: LocalGeometry, *, bound: float,
+              **options) -> Registration:
+    """``register`` (a registrar or a rescuer) in the model's units, on both normals if not oriented."""
     model = entry.model
     scale = conversion(data.units, getattr(model, "units", None))
     points = data.points * scale
     curves = [c * scale for c in data.curves]
-    register = get_registrar(method, model.kind)
     orientations = [(1, geom)] if geom.oriented else [(1, geom), (-1, geom.flipped())]
     results = []
     for sign, g in orientations:
@@ -146,16 +151,35 @@ def _polished(ranking: list[Registration], models: list[ModelEntry], data: Tacti
     """``ranking`` with its best ``count`` registrations refined further by ``method``'s polisher."""
     by_name = {entry.name: entry for entry in models}
     out = list(ranking)
-    best = ranking[0].error / ranking[0].scale if ranking and ranking[0].ok else np.inf
     for i, r in enumerate(ranking[:count]):
         entry = by_name.get(r.model)
         polisher = get_polisher(method, entry.model.kind) if entry is not None and r.ok else None
         if polisher is None:
             continue
         g = _scaled(geom if r.normal_sign == 1 else geom.flipped(), r.scale)
-        better = polisher(entry.model, r, g, data.points * r.scale, curves=[c * r.scale for c in data.curves],
-                          table=entry.table, best=best * r.scale)
+        better = polisher(entry.model, r, g, data.points * r.scale)
         out[i] = dataclasses.replace(better, normal_sign=r.normal_sign, scale=r.scale)
+    return out
+
+
+def _rescued(ranking: list[Registration], models: list[ModelEntry], shares, pool, data: TactileData,
+             geom: LocalGeometry, method: str) -> list[Registration]:
+    """``ranking`` after the method's wider search on every model, if the method has one and the
+    best registration so far does not fit (the rescuer decides; it costs nothing when the best fits)."""
+    best = ranking[0].error / ranking[0].scale if ranking and ranking[0].ok else np.inf
+    rescuers = [get_rescuer(method, entry.model.kind) for entry in models]
+    if not any(r is not None and r[0](best, geom, data.points) for r in rescuers):
+        return ranking
+    if pool is not None:
+        jobs = [pool.submit(_rescue_job, share, data, geom, method, best) for share in shares]
+        found = [r for job in jobs for r in job.result()]
+    else:
+        found = [r for share in shares for r in _rescue([models[i] for i in share], data, geom, method, best)]
+    wide = {models[i].name: r for i, r in zip([i for share in shares for i in share], found)
+            if r is not None and r.ok}
+    out = [wide[r.model] if r.model in wide and (not r.ok or _rank_key(wide[r.model]) < _rank_key(r)) else r
+           for r in ranking]
+    out.sort(key=_rank_key)
     return out
 
 
@@ -178,6 +202,20 @@ def _share_job(indices, data, geom, method, options) -> list[Registration]:
     """One share, in a worker process: the models are the ones it was forked with."""
     models = _POOL["models"]
     return _share([models[i] for i in indices], data, geom, method, options)
+
+
+def _rescue(part, data, geom, method, bound) -> list[Registration | None]:
+    """The method's wider search on each model of ``part`` (``None`` where it has none)."""
+    out = []
+    for entry in part:
+        rescuer = get_rescuer(method, entry.model.kind)
+        out.append(None if rescuer is None else _on_model(rescuer[1], entry, data, geom, bound=bound))
+    return out
+
+
+def _rescue_job(indices, data, geom, method, bound) -> list[Registration | None]:
+    models = _POOL["models"]
+    return _rescue([models[i] for i in indices], data, geom, method, bound)
 
 
 def _promise(entry: ModelEntry, data: TactileData, geom: LocalGeometry, method: str) -> float:
@@ -225,7 +263,9 @@ def recognize(data: TactileData, models: Iterable[ModelEntry], *, method: str = 
         Passed to :func:`tactrec.estimation.estimate`.
     polish : int
         How many of the best models get the method's final refinement (if it
-        has one: ``fast``).
+        has one: ``fast``).  Then, if even the best does not fit, every model
+        gets the method's wider search (``fast``: see
+        :func:`tactrec.registration.mesh_fast.rescue`).
     workers : int, optional
         Processes registering models in parallel (default: up to two, the
         cores of a small machine; forked once and kept for later touches
@@ -256,6 +296,7 @@ def recognize(data: TactileData, models: Iterable[ModelEntry], *, method: str = 
     ranking.sort(key=_rank_key)
     ranking = _polished(ranking, models, data, geom, method, polish)
     ranking.sort(key=_rank_key)
+    ranking = _rescued(ranking, models, shares, pool, data, geom, method)
     best = ranking[0].model if ranking and ranking[0].ok else None
     sigma = float(np.median([noise_level(np.asarray(c, dtype=np.float64)) for c in data.curves]))
     e1 = ranking[0].error / ranking[0].scale if best is not None else 0.0

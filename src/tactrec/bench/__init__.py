@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import Callable
 
-from . import baselines, fast_vs_paper, paper_closedform, paper_example, paper_fig11, paper_mesh, scale
+from . import baselines, fast_vs_paper, fit_limit, paper_closedform, paper_example, paper_fig11, paper_mesh, scale
 
 __all__ = ["BENCHMARKS"]
 
@@ -23,4 +23,5 @@ BENCHMARKS: dict[str, Callable[..., dict]] = {
     "scale": scale.run_scale,
     "scale-exhaustive": scale.run_exhaustive,
     "baselines": baselines.run,
+    "fit-limit": fit_limit.run,
 }

@@ -8,7 +8,9 @@ Registration``.  A new method or model kind adds its module and one line here.
 greedy mesh walk); ``fast`` (the default) ranks candidates instead of
 cutting them, and refines poses in six degrees of freedom.  A method may
 also offer ``polish(model, registration, geometry, points)``, which
-:func:`tactrec.recognition.recognize` applies to the best few models.
+:func:`tactrec.recognition.recognize` applies to the best few models, a
+``rescue`` (a wider search when no model fits) and a ``promise`` (the order
+in which to register the models).
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ from ..errors import InputError
 from . import closedform_fast, closedform_paper, mesh_fast, mesh_paper
 from .result import Registration, local_frame
 
-__all__ = ["METHODS", "DEFAULT_METHOD", "Registration", "local_frame", "get_registrar", "get_polisher", "get_promise", "method_defaults"]
+__all__ = ["METHODS", "DEFAULT_METHOD", "Registration", "local_frame", "get_registrar", "get_polisher", "get_promise", "get_rescuer", "method_defaults"]
 
 METHODS: dict[str, dict[str, Callable[..., Registration]]] = {
     "paper": {"closed-form": closedform_paper.register, "mesh": mesh_paper.register},
@@ -29,6 +31,13 @@ METHODS: dict[str, dict[str, Callable[..., Registration]]] = {
 #: per method and model kind, the optional refinement of a finished registration
 POLISHERS: dict[str, dict[str, Callable[..., Registration]]] = {
     "fast": {"closed-form": closedform_fast.polish, "mesh": mesh_fast.polish},
+}
+
+#: per method and model kind, the optional wider search for touches no model fits: ``(needed(bound,
+#: geometry, points) -> bool, rescue(model, table, geometry, points, *, curves, bound) -> Registration)``;
+#: recognition runs ``rescue`` on every model when ``needed`` says the best error ``bound`` is no fit
+RESCUERS: dict[str, dict[str, tuple[Callable[..., bool], Callable[..., Registration]]]] = {
+    "fast": {"mesh": (mesh_fast.needs_rescue, mesh_fast.rescue)},
 }
 
 #: per method and model kind, the optional ``promise(model, geometry, points) -> float`` (lower is
@@ -60,6 +69,12 @@ def get_registrar(method: str, kind: str) -> Callable[..., Registration]:
 def get_polisher(method: str, kind: str) -> Callable[..., Registration] | None:
     """``method``'s refinement of a finished registration on ``kind`` models, if it has one."""
     return POLISHERS.get(method, {}).get(kind)
+
+
+def get_rescuer(method: str, kind: str) -> tuple[Callable[..., bool], Callable[..., Registration]] | None:
+    """``method``'s wider search on ``kind`` models for touches nothing fits, if it has one:
+    ``(needed, rescue)``."""
+    return RESCUERS.get(method, {}).get(kind)
 
 
 def get_promise(method: str, kind: str) -> Callable[..., float] | None:

@@ -13,12 +13,13 @@ rotation, this method
    onto the vertex normal and the data's first principal direction onto the
    vertex's, either way round; where either point is (nearly) umbilic and the
    direction means nothing, every 30 degrees about the normal instead;
-3. improves every pose by a few Gauss-Newton steps against the tangent plane
-   of the nearest vertex (a k-d tree query: the cheap stand-in for the
+3. improves every pose by a Gauss-Newton step against the tangent plane of
+   the nearest vertex (a k-d tree query: the cheap stand-in for the
    distance to the mesh; the exact closest points instead when the touch
    spans fewer than ``exact_below`` mean edges, where vertex planes are too
-   coarse), keeps each candidate's best rotation and the best ``refine``
-   candidates;
+   coarse), and the ``screen`` poses whose step predicts the best fit by
+   further steps; keeps each candidate's best rotation and the best
+   ``refine`` candidates;
 4. refines those in all six degrees of freedom by point-to-plane
    Gauss-Newton on the exact closest points (libigl's AABB tree), and the
    best ``final`` again on all data points.
@@ -26,9 +27,11 @@ rotation, this method
 The error is eq. 12's mean distance of the data points to the model, with
 exact point-to-mesh distances instead of eq. 15's sections.  ``bound`` (the
 best error found so far on other models) skips the refinement of a model
-whose cheap scores cannot come near it.  :func:`polish` continues the
-refinement of a registration: :func:`tactrec.recognition.recognize` calls it
-on the best few models only.
+whose cheap scores cannot come near it; :func:`promise` orders the models so
+that the bound tightens early.  :func:`polish` continues the refinement of a
+registration: :func:`tactrec.recognition.recognize` calls it on the best few
+models only; :func:`rescue` searches more widely on every model when none
+fits.
 """
 
 from __future__ import annotations
@@ -41,7 +44,7 @@ from ..tables import CurvatureTable
 from .result import (Registration, apply_poses, local_frame, point_to_plane_step, rotations_from_vectors,
                      rotations_z)
 
-__all__ = ["register", "polish", "refine", "prepare", "starting_poses", "DEFAULTS", "curvature_field"]
+__all__ = ["register", "polish", "rescue", "needs_rescue", "refine", "prepare", "promise", "starting_poses", "DEFAULTS", "curvature_field"]
 
 DEFAULTS = {
     "candidates": 150,      # distinct places kept after ranking every vertex by curvature
@@ -51,7 +54,7 @@ DEFAULTS = {
     "screen": 40,           # poses kept for the second cheap step, by the first step's predicted fit
     "refine": 16,           # candidates refined on the exact surface
     "iterations": 10,
-    "final": 3,             # poses refined again with all data points
+    "final": 1,             # poses refined again with all data points
     "final_iterations": 10,
     "umbilic": 0.05,        # |k1 - k2| x touch radius below this: scan the rotation instead
     "prune": 2.0,           # skip a model whose best cheap score exceeds prune x bound
@@ -100,21 +103,25 @@ def refine(model: MeshModel, R: np.ndarray, t: np.ndarray, x: np.ndarray, *, ite
     query of every point.
     """
     R, t = R.copy(), t.copy()
-    predicted = None
+    predicted = np.zeros((len(R), len(x))) if predict else None
     reach = float(np.max(np.linalg.norm(x - x.mean(axis=0), axis=1)))
+    active = np.arange(len(R))                      # the poses still moving
     for _ in range(iterations):
-        moved = apply_poses(R, t, x)                                                      # (h, m, 3)
+        moved = apply_poses(R[active], t[active], x)                                      # (a, m, 3)
         if exact:
             _, face, closest = model.closest_points(moved.reshape(-1, 3))
             n, closest = model.face_normals[face].reshape(moved.shape), closest.reshape(moved.shape)
         else:
             closest, n = _nearest_planes(model, moved)
         residual = np.sum((moved - closest) * n, axis=2)
-        R, t, step = point_to_plane_step(R, t, moved, n, residual)
+        R[active], t[active], step = point_to_plane_step(R[active], t[active], moved, n, residual)
+        w, v = step[:, :3], step[:, 3:]
         if predict:
-            predicted = residual + np.sum(np.cross(moved, n) * step[:, None, :3] + n * step[:, None, 3:], axis=2)
-        moves = np.linalg.norm(step[:, :3], axis=1) * reach + np.linalg.norm(step[:, 3:], axis=1)
-        if np.max(moves) <= tolerance * reach:
+            predicted[active] = residual + np.sum(np.cross(moved, n) * w[:, None] + n * v[:, None], axis=2)
+        # how far the step moved the data: at most |w x c + v| + |w| reach, c the moved centroid
+        moves = np.linalg.norm(np.cross(w, moved.mean(axis=1)) + v, axis=1) + np.linalg.norm(w, axis=1) * reach
+        active = active[moves > tolerance * reach]
+        if len(active) == 0:
             break
     if predicted is not None:
         return R, t, np.abs(predicted).mean(axis=1)
@@ -290,28 +297,36 @@ def register(model: MeshModel, table: CurvatureTable, geometry: LocalGeometry, p
 
 
 def polish(model: MeshModel, registration: Registration, geometry: LocalGeometry, points: np.ndarray, *,
-           curves=None, table: CurvatureTable | None = None, best: float = 0.0, iterations: int = 30,
-           hard: float = DEFAULTS["hard"]) -> Registration:
-    """Refine ``registration`` further on all points.
-
-    If neither it nor the best registration on any model (error ``best``)
-    fits better than ``hard`` x the touch's radius (a touch across a crease,
-    where the estimated normal can be tens of degrees off), search again more
-    widely: every 30 degrees about the normal at every candidate, the normal
-    tilted 15 degrees four ways, eight points a curve and twice the cheap
-    steps (on the smoother vertex planes), no screening, and twice the poses
-    refined."""
+           iterations: int = 10, tolerance: float = DEFAULTS["tolerance"], **_ignored) -> Registration:
+    """Refine ``registration`` further on all points (``iterations`` exact Gauss-Newton steps)."""
     x = np.asarray(points, dtype=np.float64)
     R, t, error = refine(model, registration.rotation[None], registration.translation[None], x,
-                         iterations=iterations)
-    out = registration
+                         iterations=iterations, tolerance=tolerance)
     if error[0] < registration.error:
-        out = _result(model, geometry, R[0], t[0], error[0], registration.candidates)
-    radius = float(np.max(np.linalg.norm(x - geometry.contact, axis=1)))
-    if curves is not None and table is not None and min(best, out.error) > hard * radius:
-        wide = register(model, table, geometry, x, curves=curves, umbilic=np.inf, tilt=15.0, exact_below=0.0,
-                        coarse_points=8, coarse_iterations=2 * DEFAULTS["coarse_iterations"],
-                        refine_poses=2 * DEFAULTS["refine"], screen=0)
-        if wide.ok and wide.error < out.error:
-            out = wide
-    return out
+        return _result(model, geometry, R[0], t[0], error[0], registration.candidates)
+    return registration
+
+
+def needs_rescue(bound: float, geometry: LocalGeometry, points: np.ndarray, *, hard: float = DEFAULTS["hard"]) -> bool:
+    """Whether no model fits: the best error ``bound`` exceeds ``hard`` x the touch's radius (any units,
+    the same for all three)."""
+    radius = float(np.max(np.linalg.norm(np.asarray(points, dtype=np.float64) - geometry.contact, axis=1)))
+    return bool(bound > hard * radius)
+
+
+def rescue(model: MeshModel, table: CurvatureTable, geometry: LocalGeometry, points: np.ndarray, *,
+           curves=None, bound: float = np.inf, hard: float = DEFAULTS["hard"], **_ignored) -> Registration:
+    """The wider search, for a touch that no model fits (best error ``bound``, model units).
+
+    If ``bound`` exceeds ``hard`` x the touch's radius (a touch across a
+    crease, where the estimated normal can be tens of degrees off), search
+    again: every 30 degrees about the normal at every candidate, the normal
+    tilted 15 degrees four ways, eight points a curve and twice the cheap
+    steps (on the smoother vertex planes), no screening, and twice the poses
+    refined.  Otherwise a rejection ("fits already") at no cost."""
+    x = np.asarray(points, dtype=np.float64)
+    if not needs_rescue(bound, geometry, x, hard=hard):
+        return Registration.rejection(model.name, "fits already: no wider search")
+    return register(model, table, geometry, x, curves=curves, umbilic=np.inf, tilt=15.0, exact_below=0.0,
+                    coarse_points=8, coarse_iterations=2 * DEFAULTS["coarse_iterations"],
+                    refine_poses=2 * DEFAULTS["refine"], screen=0)

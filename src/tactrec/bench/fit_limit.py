@@ -1,0 +1,119 @@
+"""How far can a best-fit rule go on these touches? (``tactrec bench fit-limit``)
+
+Recognition by registration (eq. 9) names the model the data fits best.  On
+a small, noisy touch another scan may fit the data better than its own scan
+does at the true pose: then no search, however thorough, recognises it by
+that rule.  For the touches of ``fast-vs-paper`` (both protocols, same seeds)
+this benchmark recognises each with ``fast`` and also refines the true pose
+on the true scan (point-to-plane Gauss-Newton on all points, exact
+distances).  Each miss is then one of
+
+``outfitted``
+    another scan fits better than every pose known on the true scan (the
+    refined true pose and ``fast``'s own best there): the best-fit rule
+    itself picks the other scan;
+``search miss``
+    the true scan has a pose fitting better than the winner, which the search
+    did not find.
+
+``ceiling_percent`` = 100 - outfitted: what a perfect search would reach by
+the same rule, as far as the poses known tell (a better pose on the other
+scans only lowers it).  Also reported: how many misses carry the
+``ambiguous`` flag, and success among the results not flagged.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..io.atomic import write_text_atomic
+from ..recognition import recognize
+from ..registration import mesh_fast
+from ..surfaces import BUILTIN_SETS
+from ..units import conversion
+from .common import run_parallel, saved_record, sources_hash, write_json
+from .fast_vs_paper import PROTOCOLS, _database, _simulate
+
+__all__ = ["run"]
+
+
+def _code_hash() -> str:
+    return sources_hash("estimation.py", "simulation.py", "tables.py", "recognition.py", "bench/fast_vs_paper.py",
+                        "bench/fit_limit.py", "surfaces", "registration")
+
+
+def _touch(task) -> dict:
+    models, m_index, instance, seed, protocol = task
+    db = _database(models)
+    entry = db.entries[m_index]
+    site, touch = _simulate(entry, m_index, instance, seed, protocol)
+    rec = recognize(touch, db.entries)
+    errors = {r.model: r.error / r.scale for r in rec.ranking if r.ok}
+    truth = touch.meta["truth"]
+    scale = conversion(touch.units, getattr(entry.model, "units", None))
+    R = np.asarray(truth["rotation"], dtype=np.float64)[None]
+    t = np.asarray(truth["translation"], dtype=np.float64)[None] * scale
+    _, _, refined = mesh_fast.refine(entry.model, R, t, touch.points * scale, iterations=30)
+    truth_error = float(refined[0]) / scale
+    own = min(truth_error, errors.get(entry.name, np.inf))
+    others = min((e for name, e in errors.items() if name != entry.name), default=np.inf)
+    correct = rec.best == entry.name
+    return {"model": entry.name, "protocol": protocol, "instance": instance, "site": site,
+            "recognized": rec.best, "correct": correct, "ambiguous": rec.ambiguous, "seconds": rec.seconds,
+            "truth_error": truth_error, "own_error": errors.get(entry.name), "best_other": others,
+            "kind": "correct" if correct else ("outfitted" if others < own else "search miss")}
+
+
+def _touch_saved(job):
+    task, folder = job
+    models, m_index, instance, seed, protocol = task
+    return saved_record(folder / f"{protocol}-{models[m_index]}-{instance}-s{seed}.json", lambda: _touch(task))
+
+
+def _summary(rows: list[dict]) -> dict:
+    n = len(rows)
+    count = {k: sum(r["kind"] == k for r in rows) for k in ("correct", "outfitted", "search miss")}
+    misses = [r for r in rows if not r["correct"]]
+    sure = [r for r in rows if not r["ambiguous"]]
+    return {"touches": n,
+            "success_percent": 100.0 * count["correct"] / n,
+            "outfitted_percent": 100.0 * count["outfitted"] / n,
+            "search_miss_percent": 100.0 * count["search miss"] / n,
+            "ceiling_percent": 100.0 - 100.0 * count["outfitted"] / n,
+            "misses_flagged_ambiguous": sum(r["ambiguous"] for r in misses),
+            "misses": len(misses),
+            "not_ambiguous": len(sure),
+            "success_not_ambiguous_percent": 100.0 * np.mean([r["correct"] for r in sure]) if sure else None,
+            "median_truth_error_mm": float(np.median([r["truth_error"] for r in rows]))}
+
+
+def run(*, out, instances: int = 10, seed: int = 0, jobs: int | None = None, quiet: bool = False,
+        models: tuple[str, ...] | None = None, protocols=tuple(PROTOCOLS), **_ignored) -> dict:
+    """Classify ``fast``'s misses on the fast-vs-paper touches; write ``fit-limit.json`` and ``.md``."""
+    out = Path(out)
+    models = tuple(models or BUILTIN_SETS["paper-fig11"])
+    tasks = [(models, m, i, seed, p) for p in protocols for m in range(len(models)) for i in range(instances)]
+    parts = out / "fit-limit.parts" / _code_hash()
+    parts.mkdir(parents=True, exist_ok=True)
+    records = run_parallel(_touch_saved, [(t, parts) for t in tasks], jobs=jobs or 1, quiet=quiet,
+                           desc="fit-limit")
+    table = {"benchmark": "fit-limit", "instances": instances, "seed": seed, "models": list(models),
+             "protocols": {p: PROTOCOLS[p] for p in protocols},
+             "summary": {p: _summary([r for r in records if r["protocol"] == p]) for p in protocols},
+             "records": records}
+    out.mkdir(parents=True, exist_ok=True)
+    write_json(out / "fit-limit.json", table)
+    lines = [f"{len(models)} YCB scans, {instances} touches each per protocol (seed {seed}), method fast.", "",
+             "| protocol | success | outfitted | search misses | ceiling | misses flagged ambiguous | "
+             "success when not flagged |", "|---|---|---|---|---|---|---|"]
+    for p, s in table["summary"].items():
+        sure = "-" if s["success_not_ambiguous_percent"] is None else \
+            f"{s['success_not_ambiguous_percent']:.0f}% of {s['not_ambiguous']}"
+        lines.append(f"| {p} | {s['success_percent']:.0f}% | {s['outfitted_percent']:.0f}% | "
+                     f"{s['search_miss_percent']:.0f}% | {s['ceiling_percent']:.0f}% | "
+                     f"{s['misses_flagged_ambiguous']} of {s['misses']} | {sure} |")
+    table["text"] = "\n".join(lines) + "\n"
+    write_text_atomic(out / "fit-limit.md", table["text"])
+    return table
