@@ -240,3 +240,17 @@ def test_wider_search_rescues_a_touch_across_a_crease():
     assert np.linalg.norm(wide.location - touch.meta["truth"]["contact"]) < 0.05
     fitted = mesh_fast.rescue(entry.model, entry.table, geom, touch.points, curves=touch.curves, bound=wide.error)
     assert not fitted.ok and "fits already" in fitted.rejected
+
+
+def test_a_broken_worker_pool_falls_back_to_this_process(scans, monkeypatch):
+    from concurrent.futures.process import BrokenProcessPool
+
+    class Broken:
+        def submit(self, *args):
+            raise BrokenProcessPool("a worker died")
+
+    touch = simulate_touch(scans.get("pear").model, [2023], points=61, spacing=0.3, angle=60.0, rng=2)
+    expected = recognize(touch, scans, workers=1)
+    monkeypatch.setattr(recognition, "_workers", lambda models, workers: Broken())
+    again = recognize(touch, scans, workers=2)
+    assert [(r.model, r.error) for r in again.ranking] == [(r.model, r.error) for r in expected.ranking]

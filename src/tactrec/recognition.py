@@ -14,6 +14,7 @@ import multiprocessing
 import os
 import time
 from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from typing import Iterable
 
 import numpy as np
@@ -170,11 +171,8 @@ def _rescued(ranking: list[Registration], models: list[ModelEntry], shares, pool
     rescuers = [get_rescuer(method, entry.model.kind) for entry in models]
     if not any(r is not None and r[0](best, geom, data.points) for r in rescuers):
         return ranking
-    if pool is not None:
-        jobs = [pool.submit(_rescue_job, share, data, geom, method, best) for share in shares]
-        found = [r for job in jobs for r in job.result()]
-    else:
-        found = [r for share in shares for r in _rescue([models[i] for i in share], data, geom, method, best)]
+    found = _over_shares(pool, shares, _rescue_job, lambda part: _rescue(part, data, geom, method, best), models,
+                         data, geom, method, best)
     wide = {models[i].name: r for i, r in zip([i for share in shares for i in share], found)
             if r is not None and r.ok}
     out = [wide[r.model] if r.model in wide and (not r.ok or _rank_key(wide[r.model]) < _rank_key(r)) else r
@@ -226,6 +224,18 @@ def _promise(entry: ModelEntry, data: TactileData, geom: LocalGeometry, method: 
     scale = conversion(data.units, getattr(entry.model, "units", None))
     orientations = [geom] if geom.oriented else [geom, geom.flipped()]
     return min(promise(entry.model, _scaled(g, scale), data.points * scale) for g in orientations)
+
+
+def _over_shares(pool, shares, job, local, models, *args) -> list:
+    """``job(share, *args)`` for every share in the worker processes, results in share order; or
+    ``local`` on each share's models in this process, without a pool or if the pool broke."""
+    if pool is not None:
+        try:
+            futures = [pool.submit(job, share, *args) for share in shares]
+            return [r for future in futures for r in future.result()]
+        except BrokenProcessPool:              # a worker died (e.g. out of memory): go on without
+            _POOL.clear()
+    return [r for share in shares for r in local([models[i] for i in share])]
 
 
 def _workers(models: list[ModelEntry], workers: int) -> ProcessPoolExecutor | None:
@@ -288,11 +298,8 @@ def recognize(data: TactileData, models: Iterable[ModelEntry], *, method: str = 
     order = sorted(range(len(models)), key=lambda i: (_promise(models[i], data, geom, method), i))
     shares = [order[k::SHARES] for k in range(SHARES)]
     pool = _workers(models, workers)
-    if pool is not None:
-        jobs = [pool.submit(_share_job, share, data, geom, method, options) for share in shares]
-        ranking = [r for job in jobs for r in job.result()]
-    else:
-        ranking = [r for share in shares for r in _share([models[i] for i in share], data, geom, method, options)]
+    ranking = _over_shares(pool, shares, _share_job, lambda part: _share(part, data, geom, method, options), models,
+                           data, geom, method, options)
     ranking.sort(key=_rank_key)
     ranking = _polished(ranking, models, data, geom, method, polish)
     ranking.sort(key=_rank_key)
