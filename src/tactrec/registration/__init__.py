@@ -21,7 +21,8 @@ from ..errors import InputError
 from . import closedform_fast, closedform_paper, mesh_fast, mesh_paper
 from .result import Registration, local_frame
 
-__all__ = ["METHODS", "DEFAULT_METHOD", "Registration", "local_frame", "get_registrar", "get_polisher", "get_promise", "get_rescuer", "method_defaults"]
+__all__ = ["METHODS", "DEFAULT_METHOD", "Registration", "local_frame", "get_registrar", "get_polisher", "get_promise",
+           "get_rescuer", "method_defaults"]
 
 METHODS: dict[str, dict[str, Callable[..., Registration]]] = {
     "paper": {"closed-form": closedform_paper.register, "mesh": mesh_paper.register},

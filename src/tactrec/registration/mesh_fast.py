@@ -44,7 +44,8 @@ from ..tables import CurvatureTable
 from .result import (Registration, apply_poses, local_frame, point_to_plane_step, rotations_from_vectors,
                      rotations_z)
 
-__all__ = ["register", "polish", "rescue", "needs_rescue", "refine", "prepare", "promise", "starting_poses", "DEFAULTS", "curvature_field"]
+__all__ = ["register", "polish", "rescue", "needs_rescue", "refine", "prepare", "promise", "starting_poses", "DEFAULTS",
+           "curvature_field"]
 
 DEFAULTS = {
     "candidates": 150,      # distinct places kept after ranking every vertex by curvature
@@ -252,7 +253,7 @@ def register(model: MeshModel, table: CurvatureTable, geometry: LocalGeometry, p
              coarse_iterations: int = DEFAULTS["coarse_iterations"], refine_poses: int = DEFAULTS["refine"],
              iterations: int = DEFAULTS["iterations"], final: int = DEFAULTS["final"],
              final_iterations: int = DEFAULTS["final_iterations"], umbilic: float = DEFAULTS["umbilic"],
-                      prune: float = DEFAULTS["prune"], exact_below: float = DEFAULTS["exact_below"], tilt: float = 0.0,
+             prune: float = DEFAULTS["prune"], exact_below: float = DEFAULTS["exact_below"], tilt: float = 0.0,
              screen: int = DEFAULTS["screen"], tolerance: float = DEFAULTS["tolerance"],
              exhaustive: bool = False, **_ignored) -> Registration:
     """Register the data curves onto ``model`` (steps 1-4 of the module text).
