@@ -62,7 +62,8 @@ def _touch(task) -> dict:
     correct = rec.best == entry.name
     return {"model": entry.name, "protocol": protocol, "instance": instance, "site": site,
             "recognized": rec.best, "correct": correct, "ambiguous": rec.ambiguous, "seconds": rec.seconds,
-            "truth_error": truth_error, "own_error": errors.get(entry.name), "best_other": others,
+            "truth_error": truth_error, "own_error": errors.get(entry.name),
+            "best_other": others if np.isfinite(others) else None,
             "kind": "correct" if correct else ("outfitted" if others < own else "search miss")}
 
 
