@@ -171,8 +171,7 @@ def _rescued(ranking: list[Registration], models: list[ModelEntry], shares, pool
     rescuers = [get_rescuer(method, entry.model.kind) for entry in models]
     if not any(r is not None and r[0](best, geom, data.points) for r in rescuers):
         return ranking
-    found = _over_shares(pool, shares, _rescue_job, lambda part: _rescue(part, data, geom, method, best), models,
-                         data, geom, method, best)
+    found = _over_shares(pool, shares, models, _rescue, data, geom, method, best)
     wide = {models[i].name: r for i, r in zip([i for share in shares for i in share], found)
             if r is not None and r.ok}
     out = [wide[r.model] if r.model in wide and (not r.ok or _rank_key(wide[r.model]) < _rank_key(r)) else r
@@ -196,10 +195,10 @@ def _share(part, data, geom, method, options) -> list[Registration]:
 _POOL: dict = {}
 
 
-def _share_job(indices, data, geom, method, options) -> list[Registration]:
-    """One share, in a worker process: the models are the ones it was forked with."""
+def _in_worker(stage, indices, *args) -> list:
+    """``stage`` on the models at ``indices``, in a worker process: the models it was forked with."""
     models = _POOL["models"]
-    return _share([models[i] for i in indices], data, geom, method, options)
+    return stage([models[i] for i in indices], *args)
 
 
 def _rescue(part, data, geom, method, bound) -> list[Registration | None]:
@@ -209,11 +208,6 @@ def _rescue(part, data, geom, method, bound) -> list[Registration | None]:
         rescuer = get_rescuer(method, entry.model.kind)
         out.append(None if rescuer is None else _on_model(rescuer[1], entry, data, geom, bound=bound))
     return out
-
-
-def _rescue_job(indices, data, geom, method, bound) -> list[Registration | None]:
-    models = _POOL["models"]
-    return _rescue([models[i] for i in indices], data, geom, method, bound)
 
 
 def _promise(entry: ModelEntry, data: TactileData, geom: LocalGeometry, method: str) -> float:
@@ -226,16 +220,16 @@ def _promise(entry: ModelEntry, data: TactileData, geom: LocalGeometry, method: 
     return min(promise(entry.model, _scaled(g, scale), data.points * scale) for g in orientations)
 
 
-def _over_shares(pool, shares, job, local, models, *args) -> list:
-    """``job(share, *args)`` for every share in the worker processes, results in share order; or
-    ``local`` on each share's models in this process, without a pool or if the pool broke."""
+def _over_shares(pool, shares, models, stage, *args) -> list:
+    """``stage(part, *args)`` on each share's models, results in share order: in the worker
+    processes, or in this process without a pool or if the pool broke."""
     if pool is not None:
         try:
-            futures = [pool.submit(job, share, *args) for share in shares]
+            futures = [pool.submit(_in_worker, stage, share, *args) for share in shares]
             return [r for future in futures for r in future.result()]
         except BrokenProcessPool:              # a worker died (e.g. out of memory): go on without
             _POOL.clear()
-    return [r for share in shares for r in local([models[i] for i in share])]
+    return [r for share in shares for r in stage([models[i] for i in share], *args)]
 
 
 def _workers(models: list[ModelEntry], workers: int) -> ProcessPoolExecutor | None:
@@ -298,8 +292,7 @@ def recognize(data: TactileData, models: Iterable[ModelEntry], *, method: str = 
     order = sorted(range(len(models)), key=lambda i: (_promise(models[i], data, geom, method), i))
     shares = [order[k::SHARES] for k in range(SHARES)]
     pool = _workers(models, workers)
-    ranking = _over_shares(pool, shares, _share_job, lambda part: _share(part, data, geom, method, options), models,
-                           data, geom, method, options)
+    ranking = _over_shares(pool, shares, models, _share, data, geom, method, options)
     ranking.sort(key=_rank_key)
     ranking = _polished(ranking, models, data, geom, method, polish)
     ranking.sort(key=_rank_key)

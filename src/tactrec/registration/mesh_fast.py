@@ -133,6 +133,11 @@ def refine(model: MeshModel, R: np.ndarray, t: np.ndarray, x: np.ndarray, *, ite
     return R, t, np.abs(np.sum((moved - closest) * n, axis=2)).mean(axis=1)
 
 
+def _touch_radius(geometry: LocalGeometry, x: np.ndarray) -> float:
+    """The touch's radius: the largest distance of a data point ``x (m, 3)`` from the contact."""
+    return float(np.max(np.linalg.norm(x - geometry.contact, axis=1)))
+
+
 def _subset(curves, per_curve: int) -> np.ndarray:
     return np.concatenate([np.asarray(c, dtype=np.float64)[np.linspace(0, len(c) - 1, per_curve).round().astype(int)]
                            for c in curves])
@@ -228,7 +233,7 @@ def promise(model: MeshModel, geometry: LocalGeometry, points: np.ndarray) -> fl
     order, so the bound that prunes later models tightens early."""
     k1, k2, _, fit_radius = curvature_field(model)
     x = np.asarray(points, dtype=np.float64)
-    radius = float(np.max(np.linalg.norm(x - geometry.contact, axis=1)))
+    radius = _touch_radius(geometry, x)
     dk1, dk2, _ = _data_curvatures(model, geometry, x, fit_radius)
     return float(np.min(np.hypot(k1 - dk1, k2 - dk2)) * radius)
 
@@ -239,7 +244,7 @@ def starting_poses(model: MeshModel, geometry: LocalGeometry, points: np.ndarray
     """The poses ``R (h, 3, 3), t (h, 3)`` the search starts from at the best ``count`` candidates
     (steps 1-2), for other refinements to start from the same places."""
     x = np.asarray(points, dtype=np.float64)
-    radius = float(np.max(np.linalg.norm(x - geometry.contact, axis=1)))
+    radius = _touch_radius(geometry, x)
     k1, k2, d1, _ = curvature_field(model)
     chosen, dk, direction = _candidates(model, geometry, x, radius, spread=spread, count=count)
     R, t, _ = _frame_poses(model, geometry, chosen, k1, k2, d1, direction, umbilic=umbilic / radius, dk=dk,
@@ -268,7 +273,7 @@ def register(model: MeshModel, table: CurvatureTable, geometry: LocalGeometry, p
         raise ValueError("mesh registration needs the data curves")
     k1, k2, d1, _ = curvature_field(model)
     x = np.asarray(points, dtype=np.float64)
-    radius = float(np.max(np.linalg.norm(x - geometry.contact, axis=1)))
+    radius = _touch_radius(geometry, x)
     if radius > model.size:
         return Registration.rejection(model.name, "the touch is larger than the model")
     # 1. every vertex ranked by its curvature gap to the data, the best of each grid cell kept
@@ -311,8 +316,7 @@ def polish(model: MeshModel, registration: Registration, geometry: LocalGeometry
 def needs_rescue(bound: float, geometry: LocalGeometry, points: np.ndarray, *, hard: float = DEFAULTS["hard"]) -> bool:
     """Whether no model fits: the best error ``bound`` exceeds ``hard`` x the touch's radius (any units,
     the same for all three)."""
-    radius = float(np.max(np.linalg.norm(np.asarray(points, dtype=np.float64) - geometry.contact, axis=1)))
-    return bool(bound > hard * radius)
+    return bool(bound > hard * _touch_radius(geometry, np.asarray(points, dtype=np.float64)))
 
 
 def rescue(model: MeshModel, table: CurvatureTable, geometry: LocalGeometry, points: np.ndarray, *,
