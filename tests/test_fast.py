@@ -242,6 +242,27 @@ def test_wider_search_rescues_a_touch_across_a_crease():
     assert not fitted.ok and "fits already" in fitted.rejected
 
 
+def test_widened_search_finds_a_flat_patch_the_curvature_ranks_low():
+    """On this flat face of a Duplo brick the curvature ranks the true place low: the first
+    search fits loosely (0.05 mm), about as well as other bricks do; the widened search (more
+    candidates, every rotation) finds the true pose."""
+    entry = build_entries(["lego_duplo-c"]).get("lego_duplo-c")
+    touch = simulate_touch(entry.model, [430], points=81, spacing=0.3, angle=60.0, rng=instance_rng(0, 33, 0))
+    geom = estimate(touch)
+    first = mesh_fast.register(entry.model, entry.table, geom, touch.points, curves=touch.curves)
+    assert first.ok and first.error > 0.02
+    # a loose best with a close runner-up widens the search over the models near it, a clear winner does not
+    assert mesh_fast.widen_scope([first.error, 1.1 * first.error, 2.0 * first.error, 9.0 * first.error],
+                                 geom, touch.points) == 3
+    assert mesh_fast.widen_scope([first.error, 5.0 * first.error], geom, touch.points) == 0
+    assert mesh_fast.widen_scope([1e-4, 1.1e-4], geom, touch.points) == 0                     # fits
+    assert mesh_fast.widen_scope([first.error, first.error], geom, touch.points, noise=first.error) == 0   # noise
+    assert mesh_fast.widen_scope([1.0, 1.0], geom, touch.points) == 0                          # no fit: rescue
+    wide = mesh_fast.widen(entry.model, entry.table, geom, touch.points, curves=touch.curves, bound=first.error)
+    assert wide.ok and wide.error < 1e-3
+    assert np.linalg.norm(wide.location - touch.meta["truth"]["contact"]) < 0.05
+
+
 def test_a_broken_worker_pool_falls_back_to_this_process(scans, monkeypatch):
     from concurrent.futures.process import BrokenProcessPool
 

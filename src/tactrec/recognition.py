@@ -21,7 +21,8 @@ import numpy as np
 
 from .estimation import LocalGeometry, estimate, noise_level
 from .io.touch import TactileData
-from .registration import DEFAULT_METHOD, Registration, get_polisher, get_promise, get_registrar, get_rescuer
+from .registration import (DEFAULT_METHOD, Registration, get_polisher, get_promise, get_registrar, get_rescuer,
+                           get_widener)
 from .tables import CurvatureTable
 from .units import conversion
 
@@ -163,6 +164,23 @@ def _polished(ranking: list[Registration], models: list[ModelEntry], data: Tacti
     return out
 
 
+def _widened(ranking: list[Registration], models: list[ModelEntry], pool, data: TactileData,
+             geom: LocalGeometry, method: str, noise: float) -> list[Registration]:
+    """``ranking`` after the method's widened search on its best-ranked models, if the method has
+    one and its scope (decided from the ranked errors) is not empty."""
+    ok = [r for r in ranking if r.ok]
+    by_name = {entry.name: i for i, entry in enumerate(models)}
+    widener = get_widener(method, models[by_name[ok[0].model]].model.kind) if ok else None
+    if widener is None:
+        return ranking
+    count = widener[0](np.array([r.error / r.scale for r in ok]), geom, data.points, noise=noise)
+    chosen = [by_name[r.model] for r in ok[:count]]
+    if not chosen:
+        return ranking
+    return _searched_again(ranking, models, [chosen[k::SHARES] for k in range(SHARES)], pool, data, geom, method,
+                           "widen", ok[0].error / ok[0].scale)
+
+
 def _rescued(ranking: list[Registration], models: list[ModelEntry], shares, pool, data: TactileData,
              geom: LocalGeometry, method: str) -> list[Registration]:
     """``ranking`` after the method's wider search on every model, if the method has one and the
@@ -171,10 +189,16 @@ def _rescued(ranking: list[Registration], models: list[ModelEntry], shares, pool
     rescuers = [get_rescuer(method, entry.model.kind) for entry in models]
     if not any(r is not None and r[0](best, geom, data.points) for r in rescuers):
         return ranking
-    found = _over_shares(pool, shares, models, _rescue, data, geom, method, best)
-    wide = {models[i].name: r for i, r in zip([i for share in shares for i in share], found)
-            if r is not None and r.ok}
-    out = [wide[r.model] if r.model in wide and (not r.ok or _rank_key(wide[r.model]) < _rank_key(r)) else r
+    return _searched_again(ranking, models, shares, pool, data, geom, method, "rescue", best)
+
+
+def _searched_again(ranking, models, shares, pool, data, geom, method, stage, best) -> list[Registration]:
+    """``ranking`` with the models in ``shares`` searched again by ``method``'s ``stage``
+    (``"widen"`` or ``"rescue"``), each kept where it fits better than before."""
+    found = _over_shares(pool, shares, models, _search_again, data, geom, method, stage, best)
+    again = {models[i].name: r for i, r in zip([i for share in shares for i in share], found)
+             if r is not None and r.ok}
+    out = [again[r.model] if r.model in again and (not r.ok or _rank_key(again[r.model]) < _rank_key(r)) else r
            for r in ranking]
     out.sort(key=_rank_key)
     return out
@@ -201,12 +225,14 @@ def _in_worker(stage, indices, *args) -> list:
     return stage([models[i] for i in indices], *args)
 
 
-def _rescue(part, data, geom, method, bound) -> list[Registration | None]:
-    """The method's wider search on each model of ``part`` (``None`` where it has none)."""
+def _search_again(part, data, geom, method, stage, bound) -> list[Registration | None]:
+    """The method's ``stage`` (``"widen"`` or ``"rescue"``) on each model of ``part`` (``None``
+    where it has none)."""
+    lookup = get_widener if stage == "widen" else get_rescuer
     out = []
     for entry in part:
-        rescuer = get_rescuer(method, entry.model.kind)
-        out.append(None if rescuer is None else _on_model(rescuer[1], entry, data, geom, bound=bound))
+        found = lookup(method, entry.model.kind)
+        out.append(None if found is None else _on_model(found[1], entry, data, geom, bound=bound))
     return out
 
 
@@ -267,8 +293,10 @@ def recognize(data: TactileData, models: Iterable[ModelEntry], *, method: str = 
         Passed to :func:`tactrec.estimation.estimate`.
     polish : int
         How many of the best models get the method's final refinement (if it
-        has one: ``fast``).  Then, if even the best does not fit, every model
-        gets the method's wider search (``fast``: see
+        has one: ``fast``).  Then, if the best fits only loosely and others
+        nearly as well, those few get the method's widened search (``fast``:
+        :func:`tactrec.registration.mesh_fast.widen`); if even the best does
+        not fit, every model gets its wider search (``fast``:
         :func:`tactrec.registration.mesh_fast.rescue`).
     workers : int, optional
         Processes registering models in parallel (default: up to two, the
@@ -296,9 +324,10 @@ def recognize(data: TactileData, models: Iterable[ModelEntry], *, method: str = 
     ranking.sort(key=_rank_key)
     ranking = _polished(ranking, models, data, geom, method, polish)
     ranking.sort(key=_rank_key)
+    sigma = float(np.median([noise_level(np.asarray(c, dtype=np.float64)) for c in data.curves]))
+    ranking = _widened(ranking, models, pool, data, geom, method, sigma)
     ranking = _rescued(ranking, models, shares, pool, data, geom, method)
     best = ranking[0].model if ranking and ranking[0].ok else None
-    sigma = float(np.median([noise_level(np.asarray(c, dtype=np.float64)) for c in data.curves]))
     e1 = ranking[0].error / ranking[0].scale if best is not None else 0.0
     margin = float(max(2.0 * sigma / np.sqrt(len(data.points)), 0.1 * e1))
     return Recognition(best, ranking, geom, time.perf_counter() - start, method, margin)

@@ -9,7 +9,8 @@ greedy mesh walk); ``fast`` (the default) ranks candidates instead of
 cutting them, and refines poses in six degrees of freedom.  A method may
 also offer ``polish(model, registration, geometry, points)``, which
 :func:`tactrec.recognition.recognize` applies to the best few models, a
-``rescue`` (a wider search when no model fits) and a ``promise`` (the order
+``widen`` (a wider search on the best few when the best fits only loosely),
+a ``rescue`` (a wider search when no model fits) and a ``promise`` (the order
 in which to register the models).
 """
 
@@ -22,7 +23,7 @@ from . import closedform_fast, closedform_paper, mesh_fast, mesh_paper
 from .result import Registration, local_frame
 
 __all__ = ["METHODS", "DEFAULT_METHOD", "Registration", "local_frame", "get_registrar", "get_polisher", "get_promise",
-           "get_rescuer", "method_defaults"]
+           "get_rescuer", "get_widener", "method_defaults"]
 
 METHODS: dict[str, dict[str, Callable[..., Registration]]] = {
     "paper": {"closed-form": closedform_paper.register, "mesh": mesh_paper.register},
@@ -32,6 +33,13 @@ METHODS: dict[str, dict[str, Callable[..., Registration]]] = {
 #: per method and model kind, the optional refinement of a finished registration
 POLISHERS: dict[str, dict[str, Callable[..., Registration]]] = {
     "fast": {"closed-form": closedform_fast.polish, "mesh": mesh_fast.polish},
+}
+
+#: per method and model kind, the optional wider search for touches the best models fit only loosely:
+#: ``(scope(errors, geometry, points, *, noise) -> int, widen(model, table, geometry, points, *, curves,
+#: bound) -> Registration)``; recognition runs ``widen`` on the ``scope`` best-ranked models
+WIDENERS: dict[str, dict[str, tuple[Callable[..., int], Callable[..., Registration]]]] = {
+    "fast": {"mesh": (mesh_fast.widen_scope, mesh_fast.widen)},
 }
 
 #: per method and model kind, the optional wider search for touches no model fits: ``(needed(bound,
@@ -76,6 +84,12 @@ def get_rescuer(method: str, kind: str) -> tuple[Callable[..., bool], Callable[.
     """``method``'s wider search on ``kind`` models for touches nothing fits, if it has one:
     ``(needed, rescue)``."""
     return RESCUERS.get(method, {}).get(kind)
+
+
+def get_widener(method: str, kind: str) -> tuple[Callable[..., int], Callable[..., Registration]] | None:
+    """``method``'s wider search on ``kind`` models for touches the best fit loosely, if it has one:
+    ``(scope, widen)``."""
+    return WIDENERS.get(method, {}).get(kind)
 
 
 def get_promise(method: str, kind: str) -> Callable[..., float] | None:

@@ -30,8 +30,10 @@ best error found so far on other models) skips the refinement of a model
 whose cheap scores cannot come near it; :func:`promise` orders the models so
 that the bound tightens early.  :func:`polish` continues the refinement of a
 registration: :func:`tactrec.recognition.recognize` calls it on the best few
-models only; :func:`rescue` searches more widely on every model when none
-fits.
+models only.  Two wider searches follow when the result is in doubt:
+:func:`widen` on the few models that fit about as well as the best when even
+the best fits only loosely (a flat or sharp patch, where the curvature ranks
+the true place low), and :func:`rescue` on every model when none fits.
 """
 
 from __future__ import annotations
@@ -44,7 +46,7 @@ from ..tables import CurvatureTable
 from .result import (Registration, apply_poses, local_frame, point_to_plane_step, rotations_from_vectors,
                      rotations_z)
 
-__all__ = ["register", "polish", "rescue", "needs_rescue", "refine", "prepare", "promise", "starting_poses", "DEFAULTS",
+__all__ = ["register", "polish", "widen", "widen_scope", "rescue", "needs_rescue", "refine", "prepare", "promise", "starting_poses", "DEFAULTS",
            "curvature_field"]
 
 DEFAULTS = {
@@ -59,7 +61,13 @@ DEFAULTS = {
     "final_iterations": 10,
     "umbilic": 0.05,        # |k1 - k2| x touch radius below this: scan the rotation instead
     "prune": 2.0,           # skip a model whose best cheap score exceeds prune x bound
-    "hard": 0.01,           # polish: search again when the error exceeds this x touch radius
+    "hard": 0.01,           # rescue: search every model again when the best error exceeds this x touch radius
+    "loose": 0.002,         # widen: the best error exceeds this x touch radius ...
+    "noise_fit": 2.0,       # ... and this x the data's noise (a true fit's mean distance is ~0.8 sigma) ...
+    "rival": 2.0,           # ... and the runner-up's is within this factor of it
+    "reach": 3.0,           # widen on the models whose error is within this factor of the best ...
+    "rivals": 12,           # ... at most this many, best first
+    "wide_candidates": 600,  # candidates of the widened search
     "exact_below": 4.0,     # a touch under this many mean edges in radius: exact distances from the start
     "tolerance": 1e-5,      # Gauss-Newton stops when no point moves more than this x the touch's reach
 }
@@ -311,6 +319,42 @@ def polish(model: MeshModel, registration: Registration, geometry: LocalGeometry
     if error[0] < registration.error:
         return _result(model, geometry, R[0], t[0], error[0], registration.candidates)
     return registration
+
+
+def widen_scope(errors: np.ndarray, geometry: LocalGeometry, points: np.ndarray, *, noise: float = 0.0,
+                loose: float = DEFAULTS["loose"], noise_fit: float = DEFAULTS["noise_fit"],
+                rival: float = DEFAULTS["rival"], reach: float = DEFAULTS["reach"],
+                rivals: int = DEFAULTS["rivals"], hard: float = DEFAULTS["hard"]) -> int:
+    """How many of the best-ranked models :func:`widen` should search again (0: none).
+
+    ``errors (k,)`` are the ranked models' errors, ascending, and ``noise`` the
+    data's noise sigma, in the units of ``points``.  The search is widened when
+    the best fits loosely (its error exceeds ``loose`` x the touch's radius and
+    ``noise_fit`` x the noise) and the runner-up fits within ``rival`` x of it:
+    the ranking is then a contest between poses that are probably both
+    wrong.  It covers the models within ``reach`` x the best error, at most
+    ``rivals`` of them.  A best error over ``hard`` x the radius is no fit at all:
+    :func:`rescue` searches every model then, and this search is not needed."""
+    e = np.asarray(errors, dtype=np.float64)
+    if len(e) < 2:
+        return 0
+    radius = _touch_radius(geometry, np.asarray(points, dtype=np.float64))
+    if not (max(loose * radius, noise_fit * noise) < e[0] <= hard * radius and e[1] <= rival * e[0]):
+        return 0
+    return int(min(rivals, np.sum(e <= reach * e[0])))
+
+
+def widen(model: MeshModel, table: CurvatureTable, geometry: LocalGeometry, points: np.ndarray, *,
+          curves=None, bound: float = np.inf, candidates: int = DEFAULTS["wide_candidates"],
+          **_ignored) -> Registration:
+    """The search widened for a loose fit: four times the candidates, every 30 degrees about the
+    normal at each, no screening and no pruning by ``bound``.
+
+    On a flat or sharp patch the data's curvature says little, so many places rank
+    alike and the true one may rank low; its principal direction means nothing.
+    There, too, the cheap score on vertex planes is too coarse to prune by."""
+    return register(model, table, geometry, points, curves=curves, candidates=candidates, umbilic=np.inf,
+                    screen=0)
 
 
 def needs_rescue(bound: float, geometry: LocalGeometry, points: np.ndarray, *, hard: float = DEFAULTS["hard"]) -> bool:
