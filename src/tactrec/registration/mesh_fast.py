@@ -43,7 +43,7 @@ import numpy as np
 from ..estimation import LocalGeometry
 from ..surfaces.mesh import MeshModel, quadric_curvatures
 from ..tables import CurvatureTable
-from .result import (Registration, apply_poses, local_frame, point_to_plane_step, rotations_from_vectors,
+from .result import (Registration, apply_poses, cross, local_frame, point_to_plane_step, rotations_from_vectors,
                      rotations_z)
 
 __all__ = ["register", "polish", "widen", "widen_scope", "rescue", "needs_rescue", "refine", "prepare", "promise", "starting_poses", "DEFAULTS",
@@ -56,9 +56,9 @@ DEFAULTS = {
     "coarse_iterations": 2,  # Gauss-Newton steps on vertex planes
     "screen": 40,           # poses kept for the second cheap step, by the first step's predicted fit
     "refine": 16,           # candidates refined on the exact surface
-    "iterations": 10,
+    "iterations": 6,        # exact Gauss-Newton steps for the refined candidates, on 3 x coarse_points a curve
     "final": 1,             # poses refined again with all data points
-    "final_iterations": 10,
+    "final_iterations": 2,  # (the best few models get :func:`polish`'s ten more)
     "umbilic": 0.05,        # |k1 - k2| x touch radius below this: scan the rotation instead
     "prune": 2.0,           # skip a model whose best cheap score exceeds prune x bound
     "hard": 0.01,           # rescue: search every model again when the best error exceeds this x touch radius
@@ -123,12 +123,14 @@ def refine(model: MeshModel, R: np.ndarray, t: np.ndarray, x: np.ndarray, *, ite
         else:
             closest, n = _nearest_planes(model, moved)
         residual = np.sum((moved - closest) * n, axis=2)
-        R[active], t[active], step = point_to_plane_step(R[active], t[active], moved, n, residual)
-        w, v = step[:, :3], step[:, 3:]
         if predict:
-            predicted[active] = residual + np.sum(np.cross(moved, n) * w[:, None] + n * v[:, None], axis=2)
+            R[active], t[active], step, predicted[active] = point_to_plane_step(R[active], t[active], moved, n,
+                                                                                residual, predict=True)
+        else:
+            R[active], t[active], step = point_to_plane_step(R[active], t[active], moved, n, residual)
         # how far the step moved the data: at most |w x c + v| + |w| reach, c the moved centroid
-        moves = np.linalg.norm(np.cross(w, moved.mean(axis=1)) + v, axis=1) + np.linalg.norm(w, axis=1) * reach
+        w, v = step[:, :3], step[:, 3:]
+        moves = np.linalg.norm(cross(w, moved.mean(axis=1)) + v, axis=1) + np.linalg.norm(w, axis=1) * reach
         active = active[moves > tolerance * reach]
         if len(active) == 0:
             break
@@ -177,11 +179,12 @@ def _frame_poses(model, geometry, chosen, k1, k2, d1, direction, *, umbilic, dk,
     """Step 2 for the candidate vertices ``chosen (c,)``: poses ``R (h, 3, 3), t (h, 3)`` and the
     candidate each belongs to, ``owner (h,)``."""
     n = model.vertex_normals[chosen]
-    F = np.stack([d1[chosen], np.cross(n, d1[chosen]), n], axis=2)                  # (c, 3, 3) columns
+    F = np.stack([d1[chosen], cross(n, d1[chosen]), n], axis=2)                     # (c, 3, 3) columns
     scan = (np.abs(k1[chosen] - k2[chosen]) < umbilic) | (abs(dk[0] - dk[1]) < umbilic)
-    psis = [np.deg2rad(np.arange(0.0, 360.0, 30.0)) if s else np.array([0.0, np.pi]) for s in scan]
-    owner = np.repeat(np.arange(len(chosen)), [len(p) for p in psis])
-    R = F[owner] @ rotations_z(np.concatenate(psis))
+    counts = np.where(scan, 12, 2)                        # every 30 degrees, or the frame either way round
+    owner = np.repeat(np.arange(len(chosen)), counts)
+    k = np.arange(len(owner)) - np.repeat(np.cumsum(counts) - counts, counts)
+    R = F[owner] @ rotations_z(k * np.where(scan[owner], np.pi / 6, np.pi))
     if tilt > 0:
         a = np.deg2rad(tilt)
         T = rotations_from_vectors(np.array([[0, 0, 0], [a, 0, 0], [-a, 0, 0], [0, a, 0], [0, -a, 0]], dtype=float))
@@ -223,8 +226,8 @@ def _candidates(model: MeshModel, geometry: LocalGeometry, x: np.ndarray, radius
     gap = np.hypot(k1 - dk1, k2 - dk2)
     if count is None:
         return np.argsort(gap, kind="stable"), (dk1, dk2), direction
-    low, size = model.vertices.min(axis=0), radius / spread
-    span = np.floor((model.vertices.max(axis=0) - low) / size).astype(np.int64) + 1
+    (low, high), size = model.bounds, radius / spread
+    span = np.floor((high - low) / size).astype(np.int64) + 1
     for head in (20 * count, len(gap)):      # the best-ranked vertices usually hold enough distinct cells
         order = np.argpartition(gap, head)[:head] if head < len(gap) else np.arange(len(gap))
         order = order[np.lexsort((order, gap[order]))]

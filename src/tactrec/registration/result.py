@@ -111,7 +111,16 @@ def rotations_from_vectors(axis_angle: np.ndarray) -> np.ndarray:
     K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -k[:, 2], k[:, 1], -k[:, 0]
     K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = k[:, 2], -k[:, 1], k[:, 0]
     s, c = np.sin(theta)[:, None, None], np.cos(theta)[:, None, None]
-    return np.eye(3) + s * K + (1 - c) * (K @ K)
+    return np.eye(3) + s * K + (1 - c) * (k[:, :, None] * k[:, None, :] - np.eye(3))      # K K = k k^T - I
+
+
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``a x b`` over the last axis (``(..., 3)``; :func:`numpy.cross` without its overhead on small arrays)."""
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
+    out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
+    out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+    return out
 
 
 def apply_poses(R: np.ndarray, t: np.ndarray, x: np.ndarray) -> np.ndarray:
@@ -120,7 +129,7 @@ def apply_poses(R: np.ndarray, t: np.ndarray, x: np.ndarray) -> np.ndarray:
 
 
 def point_to_plane_step(R: np.ndarray, t: np.ndarray, moved: np.ndarray, normals: np.ndarray,
-                        residuals: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                        residuals: np.ndarray, *, predict: bool = False):
     """One damped Gauss-Newton (Levenberg-Marquardt) step on poses ``R (h, 3, 3), t (h, 3)``.
 
     ``moved (h, m, 3)`` are the data points under the poses, ``normals (h, m, 3)``
@@ -129,17 +138,18 @@ def point_to_plane_step(R: np.ndarray, t: np.ndarray, moved: np.ndarray, normals
     origin and a translation, linearised as ``r + (y x n) . w + n . v``; the
     damping keeps directions that a flat or cylindrical patch leaves
     unconstrained from running away.  Returns the new poses and the steps
-    ``(h, 6)``.
+    ``(h, 6)``; with ``predict``, also the residuals the linearisation predicts
+    after them ``(h, m)``.
     """
     J = np.empty(moved.shape[:2] + (6,))                                              # (h, m, 6)
-    y, n = moved, normals
-    J[..., 0] = y[..., 1] * n[..., 2] - y[..., 2] * n[..., 1]                         # y x n
-    J[..., 1] = y[..., 2] * n[..., 0] - y[..., 0] * n[..., 2]
-    J[..., 2] = y[..., 0] * n[..., 1] - y[..., 1] * n[..., 0]
-    J[..., 3:] = n
+    J[..., :3] = cross(moved, normals)
+    J[..., 3:] = normals
     Jt = np.swapaxes(J, 1, 2)
     JtJ = Jt @ J
     damp = 1e-6 * (np.trace(JtJ, axis1=1, axis2=2)[:, None, None] / 6.0 + 1e-12)
     step = np.linalg.solve(JtJ + damp * np.eye(6), -(Jt @ residuals[..., None]))[..., 0]
     dR = rotations_from_vectors(step[:, :3])
-    return dR @ R, np.einsum("hij,hj->hi", dR, t) + step[:, 3:], step
+    R, t = dR @ R, np.einsum("hij,hj->hi", dR, t) + step[:, 3:]
+    if predict:
+        return R, t, step, residuals + (J @ step[..., None])[..., 0]
+    return R, t, step

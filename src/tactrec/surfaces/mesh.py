@@ -225,8 +225,13 @@ class MeshModel(SurfaceModel):
         return np.concatenate(self.rings(vertex, k))
 
     @cached_property
+    def bounds(self) -> np.ndarray:
+        """``(2, 3)``: the smallest and largest vertex coordinates."""
+        return np.stack([self.vertices.min(axis=0), self.vertices.max(axis=0)])
+
+    @cached_property
     def size(self) -> float:
-        return float(np.linalg.norm(np.ptp(self.vertices, axis=0)))
+        return float(np.linalg.norm(self.bounds[1] - self.bounds[0]))
 
     @cached_property
     def edge_lengths(self) -> np.ndarray:
