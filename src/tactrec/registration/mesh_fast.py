@@ -46,8 +46,8 @@ from ..tables import CurvatureTable
 from .result import (Registration, apply_poses, cross, local_frame, point_to_plane_step, rotations_from_vectors,
                      rotations_z)
 
-__all__ = ["register", "polish", "widen", "widen_scope", "rescue", "needs_rescue", "refine", "prepare", "promise", "starting_poses", "DEFAULTS",
-           "curvature_field"]
+__all__ = ["register", "polish", "widen", "widen_scope", "rescue", "needs_rescue", "refine", "prepare", "promise",
+           "starting_poses", "DEFAULTS", "curvature_field"]
 
 DEFAULTS = {
     "candidates": 150,      # distinct places kept after ranking every vertex by curvature
