@@ -178,7 +178,7 @@ def _widened(ranking: list[Registration], models: list[ModelEntry], pool, data: 
     if not chosen:
         return ranking
     return _searched_again(ranking, models, [chosen[k::SHARES] for k in range(SHARES)], pool, data, geom, method,
-                           "widen", ok[0].error / ok[0].scale)
+                           get_widener, ok[0].error / ok[0].scale)
 
 
 def _rescued(ranking: list[Registration], models: list[ModelEntry], shares, pool, data: TactileData,
@@ -189,13 +189,14 @@ def _rescued(ranking: list[Registration], models: list[ModelEntry], shares, pool
     rescuers = [get_rescuer(method, entry.model.kind) for entry in models]
     if not any(r is not None and r[0](best, geom, data.points) for r in rescuers):
         return ranking
-    return _searched_again(ranking, models, shares, pool, data, geom, method, "rescue", best)
+    return _searched_again(ranking, models, shares, pool, data, geom, method, get_rescuer, best)
 
 
-def _searched_again(ranking, models, shares, pool, data, geom, method, stage, best) -> list[Registration]:
-    """``ranking`` with the models in ``shares`` searched again by ``method``'s ``stage``
-    (``"widen"`` or ``"rescue"``), each kept where it fits better than before."""
-    found = _over_shares(pool, shares, models, _search_again, data, geom, method, stage, best)
+def _searched_again(ranking, models, shares, pool, data, geom, method, lookup, best) -> list[Registration]:
+    """``ranking`` with the models in ``shares`` searched again by the search ``lookup``
+    (:func:`get_widener` or :func:`get_rescuer`) finds for ``method``, each kept where it fits
+    better than before."""
+    found = _over_shares(pool, shares, models, _search_again, data, geom, method, lookup, best)
     again = {models[i].name: r for i, r in zip([i for share in shares for i in share], found)
              if r is not None and r.ok}
     out = [again[r.model] if r.model in again and (not r.ok or _rank_key(again[r.model]) < _rank_key(r)) else r
@@ -225,10 +226,9 @@ def _in_worker(stage, indices, *args) -> list:
     return stage([models[i] for i in indices], *args)
 
 
-def _search_again(part, data, geom, method, stage, bound) -> list[Registration | None]:
-    """The method's ``stage`` (``"widen"`` or ``"rescue"``) on each model of ``part`` (``None``
-    where it has none)."""
-    lookup = get_widener if stage == "widen" else get_rescuer
+def _search_again(part, data, geom, method, lookup, bound) -> list[Registration | None]:
+    """The search ``lookup(method, kind)`` gives (a ``(when, search)`` pair) on each model of
+    ``part`` (``None`` where there is none)."""
     out = []
     for entry in part:
         found = lookup(method, entry.model.kind)
