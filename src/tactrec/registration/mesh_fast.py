@@ -63,7 +63,7 @@ DEFAULTS = {
     "umbilic": 0.05,        # |k1 - k2| x touch radius below this: scan the rotation instead
     "prune": 2.0,           # skip a model whose best cheap score exceeds prune x bound
     "hard": 0.01,           # rescue: search every model again when the best error exceeds this x touch radius
-    "loose": 0.002,         # widen: the best error exceeds this x touch radius ...
+    "loose": 0.001,         # widen: the best error exceeds this x touch radius ...
     "noise_fit": 2.0,       # ... and this x the data's noise (a true fit's mean distance is ~0.8 sigma) ...
     "rival": 2.0,           # ... and the runner-up's is within this factor of it: widen on every model
     "wide_candidates": 600,  # candidates of the widened search
@@ -346,13 +346,15 @@ def widen(model: MeshModel, table: CurvatureTable, geometry: LocalGeometry, poin
           curves=None, bound: float = np.inf, candidates: int = DEFAULTS["wide_candidates"],
           **_ignored) -> Registration:
     """The search widened for a loose fit: four times the candidates, every 30 degrees about the
-    normal at each, no screening and no pruning by ``bound``.
+    normal at each, exact distances from the first step, no screening and no pruning by ``bound``.
 
     On a flat or sharp patch the data's curvature says little, so many places rank
     alike and the true one may rank low; its principal direction means nothing.
-    There, too, the cheap score on vertex planes is too coarse to prune by."""
+    There, too, vertex planes mislead: near a rim or a thin wall the nearest vertex
+    can lie across the edge or on the other side, and a step towards its plane
+    leads away from the true pose."""
     return register(model, table, geometry, points, curves=curves, candidates=candidates, umbilic=np.inf,
-                    screen=0)
+                    screen=0, exact_below=np.inf)
 
 
 def needs_rescue(bound: float, geometry: LocalGeometry, points: np.ndarray, *, hard: float = DEFAULTS["hard"]) -> bool:
