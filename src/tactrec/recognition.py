@@ -164,17 +164,21 @@ def _polished(ranking: list[Registration], models: list[ModelEntry], data: Tacti
     return out
 
 
-def _widened(ranking: list[Registration], models: list[ModelEntry], shares, pool, data: TactileData,
+def _widened(ranking: list[Registration], models: list[ModelEntry], pool, data: TactileData,
              geom: LocalGeometry, method: str, noise: float) -> list[Registration]:
-    """``ranking`` after the method's widened search on every model, if the method has one and it
-    finds the ranked errors leave the result in doubt (the best fits loosely, the runner-up
-    nearly as well)."""
+    """``ranking`` after the method's widened search on its best-ranked models, if the method has
+    one and its scope (decided from the ranked errors) is not empty."""
     ok = [r for r in ranking if r.ok]
-    by_name = {entry.name: entry for entry in models}
-    widener = get_widener(method, by_name[ok[0].model].model.kind) if ok else None
-    if widener is None or not widener[0](np.array([r.error / r.scale for r in ok]), geom, data.points, noise=noise):
+    by_name = {entry.name: i for i, entry in enumerate(models)}
+    widener = get_widener(method, models[by_name[ok[0].model]].model.kind) if ok else None
+    if widener is None:
         return ranking
-    return _searched_again(ranking, models, shares, pool, data, geom, method, get_widener, ok[0].error / ok[0].scale)
+    count = widener[0](np.array([r.error / r.scale for r in ok]), geom, data.points, noise=noise)
+    chosen = [by_name[r.model] for r in ok[:count]]
+    if not chosen:
+        return ranking
+    return _searched_again(ranking, models, [chosen[k::SHARES] for k in range(SHARES)], pool, data, geom, method,
+                           get_widener, ok[0].error / ok[0].scale)
 
 
 def _rescued(ranking: list[Registration], models: list[ModelEntry], shares, pool, data: TactileData,
@@ -289,10 +293,10 @@ def recognize(data: TactileData, models: Iterable[ModelEntry], *, method: str = 
         Passed to :func:`tactrec.estimation.estimate`.
     polish : int
         How many of the best models get the method's final refinement (if it
-        has one: ``fast``).  Then, if the best fits only loosely and the
-        runner-up nearly as well, every model gets the method's widened search
-        (``fast``: :func:`tactrec.registration.mesh_fast.widen`); if even then
-        the best does not fit, every model gets its wider search (``fast``:
+        has one: ``fast``).  Then, if the best fits only loosely and others
+        nearly as well, those few get the method's widened search (``fast``:
+        :func:`tactrec.registration.mesh_fast.widen`); if even the best does
+        not fit, every model gets its wider search (``fast``:
         :func:`tactrec.registration.mesh_fast.rescue`).
     workers : int, optional
         Processes registering models in parallel (default: up to two, the
@@ -321,7 +325,7 @@ def recognize(data: TactileData, models: Iterable[ModelEntry], *, method: str = 
     ranking = _polished(ranking, models, data, geom, method, polish)
     ranking.sort(key=_rank_key)
     sigma = float(np.median([noise_level(np.asarray(c, dtype=np.float64)) for c in data.curves]))
-    ranking = _widened(ranking, models, shares, pool, data, geom, method, sigma)
+    ranking = _widened(ranking, models, pool, data, geom, method, sigma)
     ranking = _rescued(ranking, models, shares, pool, data, geom, method)
     best = ranking[0].model if ranking and ranking[0].ok else None
     e1 = ranking[0].error / ranking[0].scale if best is not None else 0.0

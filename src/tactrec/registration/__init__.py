@@ -36,11 +36,10 @@ POLISHERS: dict[str, dict[str, Callable[..., Registration]]] = {
 }
 
 #: per method and model kind, the optional wider search for touches the best models fit only loosely:
-#: ``(needed(errors, geometry, points, *, noise) -> bool, widen(model, table, geometry, points, *, curves,
-#: bound) -> Registration)``; recognition runs ``widen`` on every model when ``needed`` says the ranked
-#: errors leave the result in doubt
-WIDENERS: dict[str, dict[str, tuple[Callable[..., bool], Callable[..., Registration]]]] = {
-    "fast": {"mesh": (mesh_fast.needs_widening, mesh_fast.widen)},
+#: ``(scope(errors, geometry, points, *, noise) -> int, widen(model, table, geometry, points, *, curves,
+#: bound) -> Registration)``; recognition runs ``widen`` on the ``scope`` best-ranked models
+WIDENERS: dict[str, dict[str, tuple[Callable[..., int], Callable[..., Registration]]]] = {
+    "fast": {"mesh": (mesh_fast.widen_scope, mesh_fast.widen)},
 }
 
 #: per method and model kind, the optional wider search for touches no model fits: ``(needed(bound,
@@ -87,9 +86,9 @@ def get_rescuer(method: str, kind: str) -> tuple[Callable[..., bool], Callable[.
     return RESCUERS.get(method, {}).get(kind)
 
 
-def get_widener(method: str, kind: str) -> tuple[Callable[..., bool], Callable[..., Registration]] | None:
+def get_widener(method: str, kind: str) -> tuple[Callable[..., int], Callable[..., Registration]] | None:
     """``method``'s wider search on ``kind`` models for touches the best fit loosely, if it has one:
-    ``(needed, widen)``."""
+    ``(scope, widen)``."""
     return WIDENERS.get(method, {}).get(kind)
 
 

@@ -30,11 +30,11 @@ best error found so far on other models) skips the refinement of a model
 whose cheap scores cannot come near it; :func:`promise` orders the models so
 that the bound tightens early.  :func:`polish` continues the refinement of a
 registration: :func:`tactrec.recognition.recognize` calls it on the best few
-models only.  Two wider searches follow when the result is in doubt, each on
-every model: :func:`widen` when even the best fits only loosely and the
-runner-up about as well (a flat or sharp patch, where the curvature ranks
-the true place low, or prunes the true model before its place is found), and
-:func:`rescue` when the best, after that, still does not fit.
+models only.  Two wider searches follow when the result is in doubt:
+:func:`widen` on the few models that fit about as well as the best when even
+the best fits only loosely (a flat or sharp patch, where the curvature ranks
+the true place low), and :func:`rescue` on every model when, after that, none
+fits.
 """
 
 from __future__ import annotations
@@ -47,7 +47,7 @@ from ..tables import CurvatureTable
 from .result import (Registration, apply_poses, cross, local_frame, point_to_plane_step, rotations_from_vectors,
                      rotations_z)
 
-__all__ = ["register", "polish", "widen", "needs_widening", "rescue", "needs_rescue", "refine", "prepare", "promise",
+__all__ = ["register", "polish", "widen", "widen_scope", "rescue", "needs_rescue", "refine", "prepare", "promise",
            "starting_poses", "DEFAULTS", "curvature_field"]
 
 DEFAULTS = {
@@ -65,7 +65,9 @@ DEFAULTS = {
     "hard": 0.01,           # rescue: search every model again when the best error exceeds this x touch radius
     "loose": 0.001,         # widen: the best error exceeds this x touch radius ...
     "noise_fit": 2.0,       # ... and this x the data's noise (a true fit's mean distance is ~0.8 sigma) ...
-    "rival": 2.0,           # ... and the runner-up's is within this factor of it: widen on every model
+    "rival": 2.0,           # ... and the runner-up's is within this factor of it
+    "reach": 3.0,           # widen on the models whose error is within this factor of the best ...
+    "rivals": 12,           # ... at most this many, best first
     "wide_candidates": 600,  # candidates of the widened search
     "exact_below": 4.0,     # a touch under this many mean edges in radius: exact distances from the start
     "tolerance": 1e-5,      # Gauss-Newton stops when no point moves more than this x the touch's reach
@@ -323,23 +325,27 @@ def polish(model: MeshModel, registration: Registration, geometry: LocalGeometry
     return registration
 
 
-def needs_widening(errors: np.ndarray, geometry: LocalGeometry, points: np.ndarray, *, noise: float = 0.0,
-                   loose: float = DEFAULTS["loose"], noise_fit: float = DEFAULTS["noise_fit"],
-                   rival: float = DEFAULTS["rival"]) -> bool:
-    """Whether every model should get :func:`widen`'s search.
+def widen_scope(errors: np.ndarray, geometry: LocalGeometry, points: np.ndarray, *, noise: float = 0.0,
+                loose: float = DEFAULTS["loose"], noise_fit: float = DEFAULTS["noise_fit"],
+                rival: float = DEFAULTS["rival"], reach: float = DEFAULTS["reach"],
+                rivals: int = DEFAULTS["rivals"]) -> int:
+    """How many of the best-ranked models :func:`widen` should search again (0: none).
 
-    ``errors (k,)`` are the accepted models' errors, ascending, and ``noise`` the
+    ``errors (k,)`` are the ranked models' errors, ascending, and ``noise`` the
     data's noise sigma, in the units of ``points``.  The search is widened when
     the best fits loosely (its error exceeds ``loose`` x the touch's radius and
     ``noise_fit`` x the noise) and the runner-up fits within ``rival`` x of it:
-    the ranking is then a contest between poses that are probably both wrong,
-    and the first search may have pruned the true model before it found the
-    true place.  Every model then gets the same, wider search."""
+    the ranking is then a contest between poses that are probably both
+    wrong.  It covers the models within ``reach`` x the best error, at most
+    ``rivals`` of them.  A touch that nothing fits is widened too (before
+    :func:`rescue`, which it often spares)."""
     e = np.asarray(errors, dtype=np.float64)
     if len(e) < 2:
-        return False
+        return 0
     radius = _touch_radius(geometry, np.asarray(points, dtype=np.float64))
-    return bool(max(loose * radius, noise_fit * noise) < e[0] and e[1] <= rival * e[0])
+    if not (max(loose * radius, noise_fit * noise) < e[0] and e[1] <= rival * e[0]):
+        return 0
+    return int(min(rivals, np.sum(e <= reach * e[0])))
 
 
 def widen(model: MeshModel, table: CurvatureTable, geometry: LocalGeometry, points: np.ndarray, *,
