@@ -263,10 +263,11 @@ def test_widened_search_finds_a_flat_patch_the_curvature_ranks_low():
     assert np.linalg.norm(wide.location - touch.meta["truth"]["contact"]) < 0.05
 
 
-def test_widened_search_steps_on_exact_distances_near_a_rim(scans):
-    """Near the mug's rim the nearest vertex can lie across the edge, and steps towards vertex
-    planes lead away from the true pose: the first search fits loosely; the widened one, on
-    exact distances from its first step, finds the true pose."""
+def test_widened_search_steps_on_exact_distances_on_a_thin_wall(scans):
+    """On the mug's thin bottom most vertices near the contact lie on the inner surface and face
+    the other way, so steps towards the nearest vertex's plane lead away from the true pose: the
+    first search fits loosely; the widened one, on exact distances from its first step, finds
+    the true pose."""
     entry = scans.get("mug")
     touch = simulate_touch(entry.model, [2910], points=81, spacing=0.3, angle=60.0, outward=True,
                            rng=instance_rng(0, 4, 4, 0))
