@@ -291,3 +291,17 @@ def test_a_broken_worker_pool_falls_back_to_this_process(scans, monkeypatch):
     monkeypatch.setattr(recognition, "_workers", lambda models, workers: Broken())
     again = recognize(touch, scans, workers=2)
     assert [(r.model, r.error) for r in again.ranking] == [(r.model, r.error) for r in expected.ranking]
+
+
+def _pool_inside_a_worker() -> bool:
+    return recognition._workers([], 2) is not None
+
+
+def test_no_worker_pool_is_forked_inside_another_pools_worker():
+    """A benchmark running touches in worker processes: the recognitions there run their shares
+    in turn instead of forking a pool of their own (which can deadlock)."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("fork")) as pool:
+        assert pool.submit(_pool_inside_a_worker).result(timeout=120) is False

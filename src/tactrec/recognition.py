@@ -270,7 +270,10 @@ def _workers(models: list[ModelEntry], workers: int) -> ProcessPoolExecutor | No
     if _POOL.get("pool") is not None:
         _POOL["pool"].shutdown()
     _POOL.clear()
-    if workers < 2 or multiprocessing.current_process().daemon or "fork" not in multiprocessing.get_all_start_methods():
+    # not from inside another pool's worker (a benchmark running touches in parallel): forking there
+    # can deadlock, and that pool already uses the cores
+    nested = multiprocessing.current_process().daemon or multiprocessing.parent_process() is not None
+    if workers < 2 or nested or "fork" not in multiprocessing.get_all_start_methods():
         return None
     pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork"))
     _POOL.update(key=key, models=models, pool=pool)
