@@ -270,9 +270,9 @@ def _workers(models: list[ModelEntry], workers: int) -> ProcessPoolExecutor | No
     if _POOL.get("pool") is not None:
         _POOL["pool"].shutdown()
     _POOL.clear()
-    # not from inside another pool's worker (a benchmark running touches in parallel): forking there
-    # can deadlock, and that pool already uses the cores
-    nested = multiprocessing.current_process().daemon or multiprocessing.parent_process() is not None
+    # not from inside another process's worker (daemonic or a benchmark's pool running touches in
+    # parallel): forking there can deadlock, and that pool already uses the cores
+    nested = multiprocessing.parent_process() is not None
     if workers < 2 or nested or "fork" not in multiprocessing.get_all_start_methods():
         return None
     pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork"))
