@@ -1,6 +1,8 @@
 """The ``fast`` method: six-DoF registration on closed-form surfaces and meshes,
 recognition among YCB scans, and agreement with the ``paper`` method."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -240,6 +242,29 @@ def test_wider_search_rescues_a_touch_across_a_crease():
     assert np.linalg.norm(wide.location - touch.meta["truth"]["contact"]) < 0.05
     fitted = mesh_fast.rescue(entry.model, entry.table, geom, touch.points, curves=touch.curves, bound=wide.error)
     assert not fitted.ok and "fits already" in fitted.rejected
+
+
+def test_the_rescue_is_decided_by_the_first_search_not_the_widened_one(monkeypatch):
+    """The strawberry crease touch: nothing fits in the first search.  Even if the widened search
+    (on a few best-ranked models) then settles it on another model within the rescue's limit,
+    the rescue on every model runs and finds the true pose on the strawberry."""
+    entries = build_entries(["strawberry", "pear"])
+    touch = simulate_touch(entries.get("strawberry").model, [6915], points=81, spacing=0.3, angle=60.0,
+                           rng=instance_rng(0, 3, 5))
+    settled = []
+
+    def widened(ranking, models, *args):
+        # as if the widened search had found a pose on the pear just within the rescue's limit
+        pear = next(r for r in ranking if r.model == "pear")
+        radius = mesh_fast._touch_radius(estimate(touch), touch.points)
+        fit = dataclasses.replace(pear, error=0.9 * mesh_fast.DEFAULTS["hard"] * radius * pear.scale,
+                                  rejected=None)
+        settled.append(fit)
+        return sorted([fit] + [r for r in ranking if r.model != "pear"], key=recognition._rank_key)
+
+    monkeypatch.setattr(recognition, "_widened", widened)
+    rec = recognize(touch, entries, workers=1)
+    assert settled and rec.best == "strawberry" and rec.ranking[0].error < 1e-3
 
 
 def test_widened_search_finds_a_flat_patch_the_curvature_ranks_low():

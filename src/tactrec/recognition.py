@@ -181,11 +181,20 @@ def _widened(ranking: list[Registration], models: list[ModelEntry], pool, data: 
                            get_widener, ok[0].error / ok[0].scale)
 
 
+def _best_error(ranking: list[Registration]) -> float:
+    """The best error of ``ranking`` in the data's units (inf if no model was accepted)."""
+    return ranking[0].error / ranking[0].scale if ranking and ranking[0].ok else np.inf
+
+
 def _rescued(ranking: list[Registration], models: list[ModelEntry], shares, pool, data: TactileData,
-             geom: LocalGeometry, method: str) -> list[Registration]:
+             geom: LocalGeometry, method: str, best: float) -> list[Registration]:
     """``ranking`` after the method's wider search on every model, if the method has one and the
-    best registration so far does not fit (the rescuer decides; it costs nothing when the best fits)."""
-    best = ranking[0].error / ranking[0].scale if ranking and ranking[0].ok else np.inf
+    first search's best error ``best`` (data units) says no model fits (the rescuer decides; it
+    costs nothing when the best fits).
+
+    Decided on the first search's best, not the widened one's: the widened search looks at
+    the few best-ranked models only, so a fit it finds there does not show that the true
+    model, ranked lower, would not fit better after the wider search."""
     rescuers = [get_rescuer(method, entry.model.kind) for entry in models]
     if not any(r is not None and r[0](best, geom, data.points) for r in rescuers):
         return ranking
@@ -328,8 +337,9 @@ def recognize(data: TactileData, models: Iterable[ModelEntry], *, method: str = 
     ranking = _polished(ranking, models, data, geom, method, polish)
     ranking.sort(key=_rank_key)
     sigma = float(np.median([noise_level(np.asarray(c, dtype=np.float64)) for c in data.curves]))
+    first = _best_error(ranking)
     ranking = _widened(ranking, models, pool, data, geom, method, sigma)
-    ranking = _rescued(ranking, models, shares, pool, data, geom, method)
+    ranking = _rescued(ranking, models, shares, pool, data, geom, method, first)
     best = ranking[0].model if ranking and ranking[0].ok else None
     e1 = ranking[0].error / ranking[0].scale if best is not None else 0.0
     margin = float(max(2.0 * sigma / np.sqrt(len(data.points)), 0.1 * e1))

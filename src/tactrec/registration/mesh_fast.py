@@ -337,8 +337,8 @@ def widen_scope(errors: np.ndarray, geometry: LocalGeometry, points: np.ndarray,
     ``noise_fit`` x the noise) and the runner-up fits within ``rival`` x of it:
     the ranking is then a contest between poses that are probably both
     wrong.  It covers the models within ``reach`` x the best error, at most
-    ``rivals`` of them.  A touch that nothing fits is widened too (before
-    :func:`rescue`, which it often spares)."""
+    ``rivals`` of them.  A touch that nothing fits is widened too (then
+    :func:`rescue` runs after it, on every model)."""
     e = np.asarray(errors, dtype=np.float64)
     if len(e) < 2:
         return 0
