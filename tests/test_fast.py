@@ -283,6 +283,10 @@ def test_widened_search_finds_a_flat_patch_the_curvature_ranks_low():
     assert mesh_fast.widen_scope([1e-4, 1.1e-4], geom, touch.points) == 0                     # fits
     assert mesh_fast.widen_scope([first.error, first.error], geom, touch.points, noise=first.error) == 0   # noise
     assert mesh_fast.widen_scope([1.0, 1.0], geom, touch.points) == 2                  # no fit: widened, then rescued
+    # at most `rivals` models for a loose fit; a touch that nothing fits takes every model within reach
+    rivals = mesh_fast.DEFAULTS["rivals"]
+    assert mesh_fast.widen_scope(np.full(rivals + 8, first.error), geom, touch.points) == rivals
+    assert mesh_fast.widen_scope(np.r_[np.ones(rivals + 8), 4.0], geom, touch.points) == rivals + 8
     wide = mesh_fast.widen(entry.model, entry.table, geom, touch.points, curves=touch.curves, bound=first.error)
     assert wide.ok and wide.error < 1e-3
     assert np.linalg.norm(wide.location - touch.meta["truth"]["contact"]) < 0.05

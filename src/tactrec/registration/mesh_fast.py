@@ -328,7 +328,7 @@ def polish(model: MeshModel, registration: Registration, geometry: LocalGeometry
 def widen_scope(errors: np.ndarray, geometry: LocalGeometry, points: np.ndarray, *, noise: float = 0.0,
                 loose: float = DEFAULTS["loose"], noise_fit: float = DEFAULTS["noise_fit"],
                 rival: float = DEFAULTS["rival"], reach: float = DEFAULTS["reach"],
-                rivals: int = DEFAULTS["rivals"]) -> int:
+                rivals: int = DEFAULTS["rivals"], hard: float = DEFAULTS["hard"]) -> int:
     """How many of the best-ranked models :func:`widen` should search again (0: none).
 
     ``errors (k,)`` are the ranked models' errors, ascending, and ``noise`` the
@@ -337,15 +337,20 @@ def widen_scope(errors: np.ndarray, geometry: LocalGeometry, points: np.ndarray,
     ``noise_fit`` x the noise) and the runner-up fits within ``rival`` x of it:
     the ranking is then a contest between poses that are probably both
     wrong.  It covers the models within ``reach`` x the best error, at most
-    ``rivals`` of them.  A touch that nothing fits is widened too (then
-    :func:`rescue` runs after it, on every model)."""
+    ``rivals`` of them.  A touch that nothing fits (the best error exceeds
+    ``hard`` x the radius) is widened too, on every model within reach: it
+    takes :func:`rescue` on every model after this anyway, so the cap that
+    keeps a loose fit quick would save little there, and the rescue's tilted
+    search on 150 candidates can miss a small, sharp model's true place that
+    600 candidates find."""
     e = np.asarray(errors, dtype=np.float64)
     if len(e) < 2:
         return 0
     radius = _touch_radius(geometry, np.asarray(points, dtype=np.float64))
     if not (max(loose * radius, noise_fit * noise) < e[0] and e[1] <= rival * e[0]):
         return 0
-    return int(min(rivals, np.sum(e <= reach * e[0])))
+    within = int(np.sum(e <= reach * e[0]))
+    return within if e[0] > hard * radius else int(min(rivals, within))
 
 
 def widen(model: MeshModel, table: CurvatureTable, geometry: LocalGeometry, points: np.ndarray, *,
