@@ -307,8 +307,9 @@ def recognize(data: TactileData, models: Iterable[ModelEntry], *, method: str = 
         How many of the best models get the method's final refinement (if it
         has one: ``fast``).  Then, if the best fits only loosely and others
         nearly as well, those few get the method's widened search (``fast``:
-        :func:`tactrec.registration.mesh_fast.widen`); if even the best does
-        not fit, every model gets its wider search (``fast``:
+        :func:`tactrec.registration.mesh_fast.widen`); if even the first
+        search's best does not fit, all models within reach get the widened
+        search and then every model its wider search (``fast``:
         :func:`tactrec.registration.mesh_fast.rescue`).
     workers : int, optional
         Processes registering models in parallel (default: up to two, the

@@ -350,7 +350,7 @@ def widen_scope(errors: np.ndarray, geometry: LocalGeometry, points: np.ndarray,
     if not (max(loose * radius, noise_fit * noise) < e[0] and e[1] <= rival * e[0]):
         return 0
     within = int(np.sum(e <= reach * e[0]))
-    return within if e[0] > hard * radius else int(min(rivals, within))
+    return within if needs_rescue(e[0], geometry, points, hard=hard) else int(min(rivals, within))
 
 
 def widen(model: MeshModel, table: CurvatureTable, geometry: LocalGeometry, points: np.ndarray, *,
