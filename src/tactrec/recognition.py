@@ -178,7 +178,7 @@ def _widened(ranking: list[Registration], models: list[ModelEntry], pool, data: 
     if not chosen:
         return ranking
     return _searched_again(ranking, models, [chosen[k::SHARES] for k in range(SHARES)], pool, data, geom, method,
-                           get_widener, ok[0].error / ok[0].scale)
+                           get_widener, _best_error(ranking))
 
 
 def _best_error(ranking: list[Registration]) -> float:
@@ -342,6 +342,6 @@ def recognize(data: TactileData, models: Iterable[ModelEntry], *, method: str = 
     ranking = _widened(ranking, models, pool, data, geom, method, sigma)
     ranking = _rescued(ranking, models, shares, pool, data, geom, method, first)
     best = ranking[0].model if ranking and ranking[0].ok else None
-    e1 = ranking[0].error / ranking[0].scale if best is not None else 0.0
+    e1 = _best_error(ranking) if best is not None else 0.0
     margin = float(max(2.0 * sigma / np.sqrt(len(data.points)), 0.1 * e1))
     return Recognition(best, ranking, geom, time.perf_counter() - start, method, margin)
