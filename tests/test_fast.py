@@ -292,6 +292,29 @@ def test_widened_search_finds_a_flat_patch_the_curvature_ranks_low():
     assert np.linalg.norm(wide.location - touch.meta["truth"]["contact"]) < 0.05
 
 
+def test_the_widened_search_runs_on_the_models_its_scope_names(scans, monkeypatch):
+    """Recognition runs the widened search on exactly the best-ranked accepted models the
+    widener's scope counts, and on none when the scope is empty."""
+    from tactrec.registration import WIDENERS, Registration
+
+    touch = simulate_touch(scans.get("pear").model, [2023], points=61, spacing=0.3, angle=60.0, rng=2)
+    first = recognize(touch, scans, workers=1)
+    ranked = [r.model for r in first.ranking if r.ok]
+    assert len(ranked) >= 2
+    searched = []
+
+    def widen(model, *args, **options):
+        searched.append(model.name)
+        return Registration.rejection(model.name, "recorded")
+
+    for count in (2, 0):
+        searched.clear()
+        monkeypatch.setitem(WIDENERS["fast"], "mesh", (lambda *args, count=count, **options: count, widen))
+        again = recognize(touch, scans, workers=1)
+        assert sorted(set(searched)) == sorted(ranked[:count])
+        assert [(r.model, r.error) for r in again.ranking] == [(r.model, r.error) for r in first.ranking]
+
+
 def test_widened_search_steps_on_exact_distances_on_a_thin_wall(scans):
     """On the mug's thin bottom most vertices near the contact lie on the inner surface and face
     the other way, so steps towards the nearest vertex's plane lead away from the true pose: the
