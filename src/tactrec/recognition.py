@@ -128,7 +128,8 @@ def _on_model(register, entry: ModelEntry, data: TactileData, geom: LocalGeometr
         results.append(dataclasses.replace(r, normal_sign=sign, scale=scale))
     ok = [r for r in results if r.ok]
     if not ok:
-        return Registration.rejection(model.name, results[0].rejected, scale=scale)
+        nearest = min(results, key=lambda r: r.cheap)
+        return Registration.rejection(model.name, nearest.rejected, scale=scale, cheap=nearest.cheap)
     best = min(ok, key=lambda r: r.error)
     total = sum(r.candidates for r in results)
     return dataclasses.replace(best, candidates=total)
@@ -165,20 +166,36 @@ def _polished(ranking: list[Registration], models: list[ModelEntry], data: Tacti
 
 
 def _widened(ranking: list[Registration], models: list[ModelEntry], pool, data: TactileData,
-             geom: LocalGeometry, method: str, noise: float) -> list[Registration]:
+             geom: LocalGeometry, method: str, noise: float, options: dict) -> list[Registration]:
     """``ranking`` after the method's widened search on its best-ranked models, if the method has
-    one and its scope (decided from the ranked errors) is not empty."""
+    one and its scope (decided from the ranked errors) is not empty.
+
+    Before that, the models the first search pruned with a cheap score the method's ``revisit``
+    accepts are registered again without the bound (with ``options``), and the scope decided
+    again: a model pruned against the best error so far may yet come within the widened
+    search's reach once refined."""
     ok = [r for r in ranking if r.ok]
     by_name = {entry.name: i for i, entry in enumerate(models)}
     widener = get_widener(method, models[by_name[ok[0].model]].model.kind) if ok else None
     if widener is None:
         return ranking
-    count = widener[0](np.array([r.error / r.scale for r in ok]), geom, data.points, noise=noise)
+    scope, _, revisit = widener
+    count = scope(np.array([r.error / r.scale for r in ok]), geom, data.points, noise=noise)
+    if not count:
+        return ranking
+    best = _best_error(ranking)
+    again = [by_name[r.model] for r in ranking
+             if not r.ok and np.isfinite(r.cheap) and revisit(r.cheap / r.scale, best)]
+    if again:
+        ranking = _searched_again(ranking, models, [again[k::SHARES] for k in range(SHARES)], pool, _unbounded, data,
+                                  geom, method, options)
+        ok = [r for r in ranking if r.ok]
+        count = scope(np.array([r.error / r.scale for r in ok]), geom, data.points, noise=noise)
     chosen = [by_name[r.model] for r in ok[:count]]
     if not chosen:
         return ranking
-    return _searched_again(ranking, models, [chosen[k::SHARES] for k in range(SHARES)], pool, data, geom, method,
-                           get_widener, _best_error(ranking))
+    return _searched_again(ranking, models, [chosen[k::SHARES] for k in range(SHARES)], pool, _search_again, data,
+                           geom, method, get_widener, _best_error(ranking))
 
 
 def _best_error(ranking: list[Registration]) -> float:
@@ -198,14 +215,13 @@ def _rescued(ranking: list[Registration], models: list[ModelEntry], shares, pool
     rescuers = [get_rescuer(method, entry.model.kind) for entry in models]
     if not any(r is not None and r[0](best, geom, data.points) for r in rescuers):
         return ranking
-    return _searched_again(ranking, models, shares, pool, data, geom, method, get_rescuer, best)
+    return _searched_again(ranking, models, shares, pool, _search_again, data, geom, method, get_rescuer, best)
 
 
-def _searched_again(ranking, models, shares, pool, data, geom, method, lookup, best) -> list[Registration]:
-    """``ranking`` with the models in ``shares`` searched again by the search ``lookup``
-    (:func:`get_widener` or :func:`get_rescuer`) finds for ``method``, each kept where it fits
-    better than before."""
-    found = _over_shares(pool, shares, models, _search_again, data, geom, method, lookup, best)
+def _searched_again(ranking, models, shares, pool, stage, *args) -> list[Registration]:
+    """``ranking`` with the models in ``shares`` searched again by ``stage(part, *args)``
+    (:func:`_search_again` or :func:`_unbounded`), each kept where it fits better than before."""
+    found = _over_shares(pool, shares, models, stage, *args)
     again = {models[i].name: r for i, r in zip([i for share in shares for i in share], found)
              if r is not None and r.ok}
     out = [again[r.model] if r.model in again and (not r.ok or _rank_key(again[r.model]) < _rank_key(r)) else r
@@ -223,6 +239,11 @@ def _share(part, data, geom, method, options) -> list[Registration]:
         if r.ok:
             bound = min(bound, r.error / r.scale)
     return out
+
+
+def _unbounded(part, data, geom, method, options) -> list[Registration]:
+    """Register on the models of one share without a bound."""
+    return [register_on_model(entry, data, geom, method=method, **options) for entry in part]
 
 
 #: the worker processes and the models they were forked with (held, so their ids stay unique)
@@ -306,8 +327,10 @@ def recognize(data: TactileData, models: Iterable[ModelEntry], *, method: str = 
     polish : int
         How many of the best models get the method's final refinement (if it
         has one: ``fast``).  Then, if the best fits only loosely and others
-        nearly as well, those few get the method's widened search (``fast``:
-        :func:`tactrec.registration.mesh_fast.widen`); if even the first
+        nearly as well, the models pruned near the best are registered again
+        without the bound (``fast``: :func:`tactrec.registration.mesh_fast.revisit`),
+        and the few that fit about as well as the best get the method's
+        widened search (``fast``: :func:`tactrec.registration.mesh_fast.widen`); if even the first
         search's best does not fit, all models within reach get the widened
         search and then every model its wider search (``fast``:
         :func:`tactrec.registration.mesh_fast.rescue`).
@@ -339,7 +362,7 @@ def recognize(data: TactileData, models: Iterable[ModelEntry], *, method: str = 
     ranking.sort(key=_rank_key)
     sigma = float(np.median([noise_level(np.asarray(c, dtype=np.float64)) for c in data.curves]))
     first = _best_error(ranking)
-    ranking = _widened(ranking, models, pool, data, geom, method, sigma)
+    ranking = _widened(ranking, models, pool, data, geom, method, sigma, options)
     ranking = _rescued(ranking, models, shares, pool, data, geom, method, first)
     best = ranking[0].model if ranking and ranking[0].ok else None
     e1 = _best_error(ranking) if best is not None else 0.0

@@ -37,9 +37,11 @@ POLISHERS: dict[str, dict[str, Callable[..., Registration]]] = {
 
 #: per method and model kind, the optional wider search for touches the best models fit only loosely:
 #: ``(scope(errors, geometry, points, *, noise) -> int, widen(model, table, geometry, points, *, curves,
-#: bound) -> Registration)``; recognition runs ``widen`` on the ``scope`` best-ranked models
-WIDENERS: dict[str, dict[str, tuple[Callable[..., int], Callable[..., Registration]]]] = {
-    "fast": {"mesh": (mesh_fast.widen_scope, mesh_fast.widen)},
+#: bound) -> Registration, revisit(cheap, best) -> bool)``; recognition first registers again, without
+#: the bound, the models pruned with a cheap score ``revisit`` accepts, then runs ``widen`` on the
+#: ``scope`` best-ranked models
+WIDENERS: dict[str, dict[str, tuple[Callable[..., int], Callable[..., Registration], Callable[..., bool]]]] = {
+    "fast": {"mesh": (mesh_fast.widen_scope, mesh_fast.widen, mesh_fast.revisit)},
 }
 
 #: per method and model kind, the optional wider search for touches no model fits: ``(needed(bound,
@@ -86,9 +88,10 @@ def get_rescuer(method: str, kind: str) -> tuple[Callable[..., bool], Callable[.
     return RESCUERS.get(method, {}).get(kind)
 
 
-def get_widener(method: str, kind: str) -> tuple[Callable[..., int], Callable[..., Registration]] | None:
+def get_widener(method: str, kind: str) -> tuple[Callable[..., int], Callable[..., Registration],
+                                                Callable[..., bool]] | None:
     """``method``'s wider search on ``kind`` models for touches the best fit loosely, if it has one:
-    ``(scope, widen)``."""
+    ``(scope, widen, revisit)``."""
     return WIDENERS.get(method, {}).get(kind)
 
 

@@ -33,8 +33,9 @@ registration: :func:`tactrec.recognition.recognize` calls it on the best few
 models only.  Two wider searches follow when the result is in doubt:
 :func:`widen` on the few models that fit about as well as the best when even
 the best fits only loosely (a flat or sharp patch, where the curvature ranks
-the true place low), and :func:`rescue` on every model when, after that, none
-fits.
+the true place low), after registering again without the bound the models
+pruned near the best (:func:`revisit`), and :func:`rescue` on every model when
+none fits.
 """
 
 from __future__ import annotations
@@ -47,8 +48,8 @@ from ..tables import CurvatureTable
 from .result import (Registration, apply_poses, cross, local_frame, point_to_plane_step, rotations_from_vectors,
                      rotations_z)
 
-__all__ = ["register", "polish", "widen", "widen_scope", "rescue", "needs_rescue", "refine", "prepare", "promise",
-           "starting_poses", "DEFAULTS", "curvature_field"]
+__all__ = ["register", "polish", "widen", "widen_scope", "revisit", "rescue", "needs_rescue", "refine", "prepare",
+           "promise", "starting_poses", "DEFAULTS", "curvature_field"]
 
 DEFAULTS = {
     "candidates": 150,      # distinct places kept after ranking every vertex by curvature
@@ -69,6 +70,7 @@ DEFAULTS = {
     "reach": 3.0,           # widen on the models whose error is within this factor of the best ...
     "rivals": 12,           # ... at most this many, best first
     "wide_candidates": 600,  # candidates of the widened search
+    "revisit": 4.0,         # before widening, search again unbounded the models pruned within this x the best error
     "exact_below": 4.0,     # a touch under this many mean edges in radius: exact distances from the start
     "tolerance": 1e-5,      # Gauss-Newton stops when no point moves more than this x the touch's reach
 }
@@ -304,7 +306,8 @@ def register(model: MeshModel, table: CurvatureTable, geometry: LocalGeometry, p
     if np.isfinite(bound) and not exhaustive:
         keep = keep[cheap[keep] <= prune * bound]
         if len(keep) == 0:
-            return Registration.rejection(model.name, f"pruned: no pose came near the best error {bound:.3g}")
+            return Registration.rejection(model.name, f"pruned: no pose came near the best error {bound:.3g}",
+                                          cheap=float(cheap.min()))
     # 4. six degrees of freedom on the exact surface, then all points for the best few
     R, t, error = refine(model, R[keep], t[keep], _subset(curves, 3 * coarse_points), iterations=iterations,
                          tolerance=tolerance)
@@ -351,6 +354,19 @@ def widen_scope(errors: np.ndarray, geometry: LocalGeometry, points: np.ndarray,
         return 0
     within = int(np.sum(e <= reach * e[0]))
     return within if needs_rescue(e[0], geometry, points, hard=hard) else int(min(rivals, within))
+
+
+def revisit(cheap: float, best: float, *, factor: float = DEFAULTS["revisit"]) -> bool:
+    """Whether a model the first search pruned with the cheap score ``cheap`` should be searched
+    again, without the bound, before the search is widened around the best error ``best``
+    (the same units for both).
+
+    The widened search covers the models whose error is within ``reach`` (3) x the best;
+    the first search pruned on its cheap scores at ``prune`` (2) x the best error so far.
+    The refinement after the cheap stage can bring a pose's score down to half or less
+    (a coarse scan, a pose near an edge), so a pruned model whose cheap score lies within
+    ``factor`` x the best may well come within that reach once refined."""
+    return bool(cheap <= factor * best)
 
 
 def widen(model: MeshModel, table: CurvatureTable, geometry: LocalGeometry, points: np.ndarray, *,

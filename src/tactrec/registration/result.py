@@ -38,6 +38,10 @@ class Registration:
         +1 if the data normal was used as estimated, -1 if reversed.
     rejected : str or None
         Why the model was rejected (e.g. ``"no candidates"``).
+    cheap : float
+        For a model the search pruned (its poses came nowhere near the best
+        error so far on other models): the best score its cheap stage reached,
+        model units; ``inf`` otherwise.
     """
 
     model: str
@@ -51,10 +55,11 @@ class Registration:
     phi: float | None = None
     normal_sign: int = 1
     rejected: str | None = None
+    cheap: float = float("inf")
 
     @classmethod
-    def rejection(cls, model: str, reason: str, *, scale: float = 1.0) -> "Registration":
-        return cls(model=model, error=float("inf"), scale=scale, rejected=reason)
+    def rejection(cls, model: str, reason: str, *, scale: float = 1.0, cheap: float = float("inf")) -> "Registration":
+        return cls(model=model, error=float("inf"), scale=scale, rejected=reason, cheap=float(cheap))
 
     @property
     def ok(self) -> bool:
