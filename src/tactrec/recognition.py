@@ -180,22 +180,27 @@ def _widened(ranking: list[Registration], models: list[ModelEntry], pool, data: 
     if widener is None:
         return ranking
     scope, _, revisit = widener
-    count = scope(np.array([r.error / r.scale for r in ok]), geom, data.points, noise=noise)
-    if not count:
+
+    def count(ranked):
+        return scope(np.array([r.error / r.scale for r in ranked if r.ok]), geom, data.points, noise=noise)
+
+    if not count(ranking):
         return ranking
     best = _best_error(ranking)
     again = [by_name[r.model] for r in ranking
              if not r.ok and np.isfinite(r.cheap) and revisit(r.cheap / r.scale, best)]
     if again:
-        ranking = _searched_again(ranking, models, [again[k::SHARES] for k in range(SHARES)], pool, _unbounded, data,
-                                  geom, method, options)
-        ok = [r for r in ranking if r.ok]
-        count = scope(np.array([r.error / r.scale for r in ok]), geom, data.points, noise=noise)
-    chosen = [by_name[r.model] for r in ok[:count]]
+        ranking = _searched_again(ranking, models, _dealt(again), pool, _unbounded, data, geom, method, options)
+    chosen = [by_name[r.model] for r in ranking[:count(ranking)] if r.ok]
     if not chosen:
         return ranking
-    return _searched_again(ranking, models, [chosen[k::SHARES] for k in range(SHARES)], pool, _search_again, data,
-                           geom, method, get_widener, _best_error(ranking))
+    return _searched_again(ranking, models, _dealt(chosen), pool, _search_again, data, geom, method, get_widener,
+                           _best_error(ranking))
+
+
+def _dealt(indices: list[int]) -> list[list[int]]:
+    """``indices`` dealt into :data:`SHARES` shares (every ``SHARES``-th), in order."""
+    return [indices[k::SHARES] for k in range(SHARES)]
 
 
 def _best_error(ranking: list[Registration]) -> float:
@@ -354,7 +359,7 @@ def recognize(data: TactileData, models: Iterable[ModelEntry], *, method: str = 
     # the most promising models first, dealt into fixed shares (every SHARES-th), each with its own
     # bound: the same result whatever the number of workers and however they are scheduled
     order = sorted(range(len(models)), key=lambda i: (_promise(models[i], data, geom, method), i))
-    shares = [order[k::SHARES] for k in range(SHARES)]
+    shares = _dealt(order)
     pool = _workers(models, workers)
     ranking = _over_shares(pool, shares, models, _share, data, geom, method, options)
     ranking.sort(key=_rank_key)
