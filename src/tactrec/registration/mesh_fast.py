@@ -213,7 +213,9 @@ def _cheap_poses(model, geometry, curves, chosen, k1, k2, d1, direction, radius,
         owner = owner[keep]
         R, t, cheap = refine(model, R[keep], t[keep], x, iterations=coarse_iterations - 1, exact=exact)
     else:
-        R, t, cheap = refine(model, R, t, x, iterations=coarse_iterations, exact=exact)
+        # scored by the last step's predicted residual, as the screen does: a last exact query of
+        # every pose would cost a third of the stage (the refinement re-scores the kept ones)
+        R, t, cheap = refine(model, R, t, x, iterations=coarse_iterations, exact=exact, predict=exact)
     order = np.lexsort((cheap, owner))
     best = order[np.r_[True, owner[order][1:] != owner[order][:-1]]]             # one per candidate, in order
     return R[best], t[best], cheap[best]
