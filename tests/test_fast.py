@@ -227,7 +227,23 @@ def test_fit_limit_classifies_each_touch(tmp_path):
             assert r["best_other"] < min(r["truth_error"], r["own_error"] or np.inf)
     s = table["summary"]["p3"]
     assert s["success_percent"] + s["outfitted_percent"] + s["search_miss_percent"] == pytest.approx(100.0)
+    assert all(r["within_noise"] is False for r in rows if r["correct"])
+    assert s["clear_ceiling_percent"] <= s["ceiling_percent"]
     assert (tmp_path / "fit-limit.json").exists() and "ceiling" in table["text"]
+
+
+def test_fit_limit_paired_gap_tells_a_tie_from_a_better_fit():
+    """Two places the noise cannot tell apart give a gap within 2 standard errors; a place every
+    point fits 0.01 farther from does not, and the sign says which one fits better."""
+    from tactrec.bench.fit_limit import paired_gap
+
+    rng = np.random.default_rng(0)
+    truth = np.abs(rng.normal(0.0, 0.05, 300))
+    tie = np.abs(rng.normal(0.0, 0.05, 300))
+    assert abs(paired_gap(tie, truth)) < 2.0
+    farther = truth + 0.01 + rng.normal(0.0, 0.005, 300)
+    assert paired_gap(farther, truth) > 10.0 and paired_gap(truth, farther) < -10.0
+    assert paired_gap(truth, truth) == 0.0 and paired_gap(np.full(5, 0.5), np.full(5, 0.25)) == np.inf
 
 
 def test_wider_search_rescues_a_touch_across_a_crease():

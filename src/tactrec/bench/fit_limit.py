@@ -20,6 +20,14 @@ distances).  Each miss is then one of
 the same rule, as far as the poses known tell (a better pose on the other
 scans only lowers it).  Also reported: how many misses carry the
 ``ambiguous`` flag, and success among the results not flagged.
+
+A miss is also tested against the noise: the winner's pose and the true pose
+are compared point by point (a paired test on the data's distances to each
+scan).  When the two mean distances differ by less than two standard errors
+of that difference, the miss is *within the noise*: the data cannot tell the
+two places apart, and which one fits better is down to the noise of this
+touch.  ``clear_ceiling_percent`` = 100 - outfitted - search misses within
+the noise: what a perfect search reaches where the data do tell them apart.
 """
 
 from __future__ import annotations
@@ -31,6 +39,7 @@ import numpy as np
 from ..io.atomic import write_text_atomic
 from ..recognition import recognize
 from ..registration import mesh_fast
+from ..registration.result import apply_poses
 from ..surfaces import BUILTIN_SETS
 from ..units import conversion
 from .common import run_parallel, saved_record, sources_hash, write_json
@@ -44,6 +53,22 @@ def _code_hash() -> str:
                         "bench/fit_limit.py", "surfaces", "registration")
 
 
+def paired_gap(winner: np.ndarray, truth: np.ndarray) -> float:
+    """How many standard errors the data points lie farther from the winner than from the truth.
+
+    ``winner (m,)`` and ``truth (m,)`` are each point's distance to the winning scan under its
+    pose and to the true scan under the true pose.  Returns ``mean(d) / (std(d) / sqrt(m))``
+    with ``d = winner - truth``: positive when the truth fits better, and below 2 in size when
+    the difference is within the noise (0 when every point agrees, infinite when all differ
+    alike).
+    """
+    d = np.asarray(winner, dtype=np.float64) - np.asarray(truth, dtype=np.float64)
+    mean, se = float(np.mean(d)), float(np.std(d, ddof=1)) / np.sqrt(len(d))
+    if se == 0.0:
+        return 0.0 if mean == 0.0 else float(np.copysign(np.inf, mean))
+    return mean / se
+
+
 def _touch(task) -> dict:
     models, m_index, instance, seed, protocol = task
     db = _database(models)
@@ -55,15 +80,24 @@ def _touch(task) -> dict:
     scale = conversion(touch.units, getattr(entry.model, "units", None))
     R = np.asarray(truth["rotation"], dtype=np.float64)[None]
     t = np.asarray(truth["translation"], dtype=np.float64)[None] * scale
-    _, _, refined = mesh_fast.refine(entry.model, R, t, touch.points * scale, iterations=30)
+    R, t, refined = mesh_fast.refine(entry.model, R, t, touch.points * scale, iterations=30)
     truth_error = float(refined[0]) / scale
     own = min(truth_error, errors.get(entry.name, np.inf))
     others = min((e for name, e in errors.items() if name != entry.name), default=np.inf)
     correct = rec.best == entry.name
+    gap = None
+    if not correct and rec.registration is not None:
+        win = rec.registration
+        x = np.asarray(touch.points, dtype=np.float64)
+        on_winner = db.get(win.model).model.distance(apply_poses(win.rotation[None] * win.scale,
+                                                                 win.translation[None], x)[0]) / win.scale
+        on_truth = entry.model.distance(apply_poses(R, t, x * scale)[0]) / scale
+        gap = paired_gap(on_winner, on_truth)
     return {"model": entry.name, "protocol": protocol, "instance": instance, "site": site,
             "recognized": rec.best, "correct": correct, "ambiguous": rec.ambiguous, "seconds": rec.seconds,
             "truth_error": truth_error, "own_error": errors.get(entry.name),
             "best_other": others if np.isfinite(others) else None,
+            "gap_se": gap, "within_noise": gap is not None and abs(gap) < 2.0,
             "kind": "correct" if correct else ("outfitted" if others < own else "search miss")}
 
 
@@ -85,6 +119,9 @@ def _summary(rows: list[dict]) -> dict:
             "ceiling_percent": 100.0 - 100.0 * count["outfitted"] / n,
             "misses_flagged_ambiguous": sum(r["ambiguous"] for r in misses),
             "misses": len(misses),
+            "misses_within_noise": sum(r["within_noise"] for r in misses),
+            "clear_ceiling_percent": 100.0 - 100.0 * (count["outfitted"] + sum(
+                r["within_noise"] for r in misses if r["kind"] == "search miss")) / n,
             "not_ambiguous": len(sure),
             "success_not_ambiguous_percent": 100.0 * np.mean([r["correct"] for r in sure]) if sure else None,
             "median_truth_error_mm": float(np.median([r["truth_error"] for r in rows]))}
@@ -107,13 +144,15 @@ def run(*, out, instances: int = 10, seed: int = 0, jobs: int | None = None, qui
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / "fit-limit.json", table)
     lines = [f"{len(models)} YCB scans, {instances} touches each per protocol (seed {seed}), method fast.", "",
-             "| protocol | success | outfitted | search misses | ceiling | misses flagged ambiguous | "
-             "success when not flagged |", "|---|---|---|---|---|---|---|"]
+             "| protocol | success | outfitted | search misses | ceiling | misses within the noise | "
+             "ceiling beyond the noise | misses flagged ambiguous | success when not flagged |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for p, s in table["summary"].items():
         sure = "-" if s["success_not_ambiguous_percent"] is None else \
             f"{s['success_not_ambiguous_percent']:.0f}% of {s['not_ambiguous']}"
         lines.append(f"| {p} | {s['success_percent']:.0f}% | {s['outfitted_percent']:.0f}% | "
                      f"{s['search_miss_percent']:.0f}% | {s['ceiling_percent']:.0f}% | "
+                     f"{s['misses_within_noise']} of {s['misses']} | {s['clear_ceiling_percent']:.0f}% | "
                      f"{s['misses_flagged_ambiguous']} of {s['misses']} | {sure} |")
     table["text"] = "\n".join(lines) + "\n"
     write_text_atomic(out / "fit-limit.md", table["text"])
