@@ -1,22 +1,28 @@
-"""The ``fast`` method: six-DoF registration on closed-form surfaces and meshes,
-recognition among YCB scans, and agreement with the ``paper`` method."""
+"""The ``fast`` method: six-DoF registration on closed-form surfaces and meshes, recognition
+among YCB scans as rates over seeded touches, against an exhaustive search, and the same
+answer under another BLAS kernel."""
 
-import dataclasses
-from collections import Counter
+import json
+import os
+import subprocess
+import sys
 
 import numpy as np
 import pytest
 
-from tactrec import recognition
 from tactrec.bench.common import instance_rng
+from tactrec.bench.fast_vs_paper import _simulate
 from tactrec.database import build_database, build_entries, load_database
 from tactrec.errors import InputError
 from tactrec.estimation import estimate
-from tactrec.recognition import recognize
-from tactrec.registration import DEFAULT_METHOD, closedform_fast, mesh_fast
+from tactrec.io.touch import save_touch
+from tactrec.methods import DEFAULT_METHOD
+from tactrec.recognition import ModelEntry, Recognizer, recognize
+from tactrec.registration import closedform_fast, mesh_fast
 from tactrec.registration.result import rotations_from_vectors
 from tactrec.simulation import simulate_random_touch, simulate_touch, spread_vertices
 from tactrec.surfaces import load_model
+from tactrec.surfaces.mesh import MeshModel
 from tactrec.tables import CurvatureTable
 
 P = dict(points=61, spacing=0.02, angle=60.0, noise=0.001)   # the benchmarks' P1/P2 settings
@@ -70,8 +76,7 @@ def test_mesh_pose_recovered_from_the_sensor_frame(scans):
     entry = scans.get("banana")
     touch = simulate_touch(entry.model, [1580], points=81, spacing=0.3, angle=60.0, rng=3)
     truth = touch.meta["truth"]
-    geom = estimate(touch)
-    reg = mesh_fast.register(entry.model, entry.table, geom, touch.points, curves=touch.curves)
+    reg = recognize(touch, [entry]).registration
     assert reg.ok and reg.error < 1e-3                                       # mm, exact distances
     assert np.linalg.norm(reg.location - truth["contact"]) < 0.05
     assert np.linalg.norm(reg.rotation - np.array(truth["rotation"])) < 0.01
@@ -79,40 +84,156 @@ def test_mesh_pose_recovered_from_the_sensor_frame(scans):
     assert np.mean(entry.model.distance(mapped)) == pytest.approx(reg.error, abs=1e-9)
 
 
-def test_gauss_newton_converges_from_a_perturbed_pose(scans):
+def test_gauss_newton_converges_from_perturbed_poses(scans):
+    """20 seeded perturbations of the true pose (5 degrees, 1 mm) on a smooth scan: at least 18
+    converge to a fit within 0.005 mm."""
     m = scans.get("pear").model
     touch = simulate_touch(m, [2023], points=81, spacing=0.3, angle=60.0, rng=1)
     R, t = np.array(touch.meta["truth"]["rotation"]), np.array(touch.meta["truth"]["translation"])
-    tilt = rotations_from_vectors(np.array([[0.05, -0.04, 0.06]]))[0]         # about 5 degrees
+    rng = np.random.default_rng(0)
+    axes = rng.normal(size=(20, 3))
+    tilt = rotations_from_vectors(np.deg2rad(5.0) * axes / np.linalg.norm(axes, axis=1)[:, None])
     R0 = tilt @ R
-    t0 = t + np.array([0.8, -0.5, 0.3])
-    before = mesh_fast._mean_distance(m, R0[None], t0[None], touch.points)[0]
-    _, _, after = mesh_fast.refine(m, R0[None], t0[None], touch.points, iterations=20)
-    assert before > 0.3 and after[0] < 0.02
+    t0 = t + rng.normal(size=(20, 3)) / np.sqrt(3.0)
+    before = mesh_fast.mean_distance(m, R0, t0, touch.points)
+    _, _, after, _ = mesh_fast.refine(m, R0, t0, touch.points, iterations=20)
+    assert np.min(before) > 0.1 and np.sum(after < 0.005) >= 18
+
+
+def _rate(entries, protocol, count, **options):
+    """Recognitions of ``count`` seeded touches per scan of ``entries`` (the fast-vs-paper protocols)."""
+    out = []
+    with Recognizer(entries, **options) as recognizer:
+        for m_index, entry in enumerate(entries):
+            for i in range(count):
+                _, touch = _simulate(entry, m_index, i, 11, protocol)
+                out.append((entry, touch, recognizer.recognize(touch)))
+    return out
 
 
 def test_fast_recognises_p3_touches(scans):
-    """P3 settings, touches in the sensor frame: the right scan, and a pose that lays the curves
-    on it (where on a surface of revolution is not always decidable, so that is not asserted)."""
-    for m_index, entry in enumerate(scans.entries):
-        vertices = spread_vertices(entry.model, 2, rings=15, rng=instance_rng(0, m_index))
-        for i, v in enumerate(vertices):
-            touch = simulate_touch(entry.model, [int(v)], points=81, spacing=0.3, angle=60.0,
-                                   rng=instance_rng(0, m_index, i))
-            fast = recognize(touch, scans, method="fast")
-            assert fast.best == entry.name, (entry.name, int(v), [(r.model, r.error) for r in fast.ranking])
-            reg = fast.registration
-            mapped = touch.points @ reg.rotation.T + reg.translation
-            assert np.mean(entry.model.distance(mapped)) == pytest.approx(reg.error, abs=1e-9) and reg.error < 0.1
-            assert entry.model.distance(reg.location[None])[0] < 1e-6
+    """The paper's P3 (24 mm curves, 60 degrees, at vertices, sensor frame), 24 seeded touches on
+    four scans: at least 23 recognised; every pose's error is the mean distance of the curves
+    under it, and at least 21 lay the curves within 0.05 mm of the scan (where on a surface of
+    revolution is not always decidable, so that is not asserted)."""
+    results = _rate(scans.entries, "p3", 6)
+    right = [(entry, touch, r) for entry, touch, r in results if r.best == entry.name]
+    assert len(right) >= 23
+    for entry, touch, r in right:
+        reg = r.registration
+        mapped = touch.points @ reg.rotation.T + reg.translation
+        assert np.mean(entry.model.distance(mapped)) == pytest.approx(reg.error, abs=1e-9)
+        assert entry.model.distance(reg.location[None])[0] < 1e-6
+    assert sum(r.registration.error < 0.05 for _, _, r in right) >= 21
+
+
+def test_fast_recognises_hard_touches(scans):
+    """Hard touches (12 mm curves, 30 degrees, anywhere on a face, Gaussian noise 0.05 mm, no
+    outward side), 24 seeded touches on four scans: at least 15 recognised."""
+    results = _rate(scans.entries, "hard", 6)
+    assert sum(r.best == entry.name for entry, _, r in results) >= 15
+
+
+def _small_meshes():
+    """Four small meshes (mm) of distinct shapes, for searches every vertex of which is affordable."""
+    import trimesh
+
+    shapes = {
+        "egg": trimesh.creation.icosphere(subdivisions=4, radius=1.0).apply_scale([30.0, 24.0, 18.0]),
+        "capsule": trimesh.creation.capsule(height=40.0, radius=12.0, count=[40, 40]),
+        "brick": trimesh.creation.box(extents=(40.0, 30.0, 20.0)).subdivide().subdivide().subdivide().subdivide(),
+        "ring": trimesh.creation.torus(major_radius=22.0, minor_radius=8.0, major_sections=72, minor_sections=32),
+    }
+    out = []
+    for name, mesh in shapes.items():
+        model = MeshModel(mesh.vertices, mesh.faces, name=name, units="mm")
+        out.append(ModelEntry(model, CurvatureTable(model.table_samples())))
+    return out
+
+
+@pytest.fixture(scope="module")
+def small():
+    return _small_meshes()
+
+
+def _small_touches(small, count, *, noise=0.0, outward=True):
+    touches = []
+    for m_index, entry in enumerate(small):
+        for i in range(count):
+            rng = instance_rng(21, m_index, i)
+            touches.append((entry.name, simulate_random_touch(entry.model, rng=rng, points=41, spacing=0.3,
+                                                              angle=60.0, noise=noise, noise_kind="gaussian",
+                                                              outward=outward)))
+    return touches
+
+
+def test_fast_against_an_exhaustive_search_on_small_meshes(small):
+    """20 seeded touches on four small meshes: the exhaustive search (every vertex, every 30
+    degrees) is the reference.  ``fast`` is right at least as often, and on at least 18 of the
+    20 its best error is within 10% (or 0.002 mm) of the exhaustive one's or lower."""
+    touches = _small_touches(small, 5, noise=0.02)
+    with Recognizer(small) as fast, Recognizer(small, exhaustive=True, refine=64) as exhaustive:
+        pairs = [(name, fast.recognize(t), exhaustive.recognize(t)) for name, t in touches]
+    right_fast = sum(f.best == name for name, f, _ in pairs)
+    right_exhaustive = sum(e.best == name for name, _, e in pairs)
+    assert right_fast >= right_exhaustive >= 19
+    close = [f.ranking[0].error <= max(1.1 * e.ranking[0].error, e.ranking[0].error + 0.002) for _, f, e in pairs]
+    assert sum(close) >= 18
 
 
 def test_worker_processes_do_not_change_the_result(scans):
     touch = simulate_touch(scans.get("mug").model, [2000], points=61, spacing=0.3, angle=45.0, rng=4)
-    one = recognize(touch, scans, workers=1)
-    two = recognize(touch, scans, workers=2)
-    assert recognition._POOL.get("pool") is not None            # the shares did run in worker processes
-    assert [(r.model, r.error) for r in one.ranking] == [(r.model, r.error) for r in two.ranking]
+    with Recognizer(scans, workers=1) as one, Recognizer(scans, workers=2) as two:
+        assert type(two.runner).__name__ == "_Pool"
+        a, b = one.recognize(touch), two.recognize(touch)
+    assert [(r.model, r.error) for r in a.ranking] == [(r.model, r.error) for r in b.ranking]
+
+
+def test_a_broken_worker_pool_falls_back_to_this_process(scans, monkeypatch):
+    from concurrent.futures.process import BrokenProcessPool
+
+    touch = simulate_touch(scans.get("pear").model, [2023], points=61, spacing=0.3, angle=60.0, rng=2)
+    expected = recognize(touch, scans)
+    with Recognizer(scans, workers=2) as recognizer:
+        def broken(*args, **kwargs):
+            raise BrokenProcessPool("a worker died")
+
+        monkeypatch.setattr(recognizer.runner.pool, "submit", broken)
+        again = recognizer.recognize(touch)
+    assert [(r.model, r.error) for r in again.ranking] == [(r.model, r.error) for r in expected.ranking]
+
+
+def _runner_inside_a_worker() -> str:
+    with Recognizer([], workers=2) as recognizer:
+        return type(recognizer.runner).__name__
+
+
+def test_no_worker_pool_is_forked_inside_another_pools_worker():
+    """A benchmark running touches in worker processes: the recognitions there run serially
+    instead of forking a pool of their own (which can deadlock)."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("fork")) as pool:
+        assert pool.submit(_runner_inside_a_worker).result(timeout=120) == "_Serial"
+
+
+def test_the_budget_bounds_the_work_and_an_unsettled_search_says_so(scans):
+    """Hard touches searched with a budget of one tier: every search stops after it, and one that
+    stops unsettled does not fit within the data's noise; searched again with the default
+    budget, it goes deeper and spends more."""
+    from tactrec.features import Touch
+    from tactrec.methods.fast import fit_limit
+
+    results = _rate(scans.entries[:2], "hard", 6, budget=1)
+    assert all(r.depth == 1 for _, _, r in results)
+    unsettled = [(touch, r) for _, touch, r in results if not r.settled]
+    assert unsettled
+    for touch, r in unsettled:
+        assert r.ranking[0].error > fit_limit(Touch.from_data(touch), 1e-3)
+    touch, r = unsettled[0]
+    deeper = recognize(touch, scans.entries[:2])
+    assert deeper.depth > 1 and deeper.work > r.work
 
 
 def test_database_keeps_the_curvature_field_and_rejects_a_corrupted_one(tmp_path):
@@ -120,23 +241,21 @@ def test_database_keeps_the_curvature_field_and_rejects_a_corrupted_one(tmp_path
     build_database(["pear"], out, quiet=True)
     model = load_database(out).get("pear").model
     assert "fine_curvatures" in model.__dict__                  # loaded, not recomputed
-    k1, k2, d1, radius = model.fine_curvatures
-    fresh = load_model("pear").fine_curvatures
-    assert np.allclose(k1, fresh[0]) and np.allclose(d1, fresh[2]) and radius == fresh[3]
+    stored, fresh = model.fine_curvatures, load_model("pear").fine_curvatures
+    for a, b in zip(stored, fresh):
+        assert np.allclose(a, b)
     # a field that does not match the mesh is a corrupted database, one line
+    import hashlib
     import io
-    import json
 
     index = json.loads((out / "index.json").read_text())
     item = index["models"][0]
     with np.load(out / item["file"], allow_pickle=False) as npz:
         arrays = {k: npz[k] for k in npz.files}
-    arrays["mesh_k1"] = arrays["mesh_k1"][:-1]
+    arrays["mesh_normal"] = arrays["mesh_normal"][:-1]
     buffer = io.BytesIO()
     np.savez_compressed(buffer, **arrays)
     (out / item["file"]).write_bytes(buffer.getvalue())
-    import hashlib
-
     item["file_sha256"] = hashlib.sha256(buffer.getvalue()).hexdigest()
     (out / "index.json").write_text(json.dumps(index))
     with pytest.raises(InputError, match="corrupted database file"):
@@ -152,6 +271,53 @@ def test_ambiguity_flag_in_the_json(table1):
     assert clear["best"] == "ellipsoid" and clear["ambiguous"] is False and clear["margin"] > 0
     same = recognize(touch, [entry, twin]).to_json()
     assert same["ambiguous"] is True
+
+
+def test_starting_poses_put_the_contact_on_candidate_vertices(scans):
+    m = scans.get("pear").model
+    touch = simulate_touch(m, [2023], points=81, spacing=0.3, angle=60.0, rng=1)
+    geom = estimate(touch)
+    R, t = mesh_fast.starting_poses(m, geom, touch.points, count=10)
+    assert 20 <= len(R) <= 120
+    contacts = np.einsum("hij,j->hi", R, geom.contact) + t
+    assert np.max(m.distance(contacts)) < 1e-9                      # each start sits on a vertex
+    assert np.allclose(np.einsum("hji,hjk->hik", R, R), np.eye(3), atol=1e-9)
+
+
+_CHILD = """
+import json, sys
+from tactrec.io.touch import load_touch
+from tactrec.recognition import Recognizer
+sys.path.insert(0, sys.argv[1])
+from test_fast import _small_meshes
+with Recognizer(_small_meshes()) as r:
+    for path in sys.argv[2:]:
+        res = r.recognize(load_touch(path))
+        print(json.dumps({"best": res.best, "ambiguous": res.ambiguous,
+                          "location": res.registration.location.tolist()}))
+"""
+
+
+def _in_a_process(kernel: str, paths) -> list[dict]:
+    env = dict(os.environ, OPENBLAS_CORETYPE=kernel)
+    out = subprocess.run([sys.executable, "-c", _CHILD, os.path.dirname(__file__), *map(str, paths)], env=env,
+                         capture_output=True, text=True, timeout=600, check=True).stdout
+    return [json.loads(line) for line in out.splitlines()]
+
+
+def test_the_same_answer_under_two_blas_kernels(small, tmp_path):
+    """The same 24 touch files recognised under the Prescott and Haswell kernels of OpenBLAS:
+    the same best model on every touch not flagged ambiguous, and contacts within 0.1 mm."""
+    paths = []
+    for k, (_, touch) in enumerate(_small_touches(small, 6, noise=0.02, outward=False)):
+        paths.append(tmp_path / f"touch-{k}.json")
+        save_touch(touch, paths[-1])
+    a, b = _in_a_process("Prescott", paths), _in_a_process("Haswell", paths)
+    assert len(a) == len(b) == 24
+    for x, y in zip(a, b):
+        if not (x["ambiguous"] or y["ambiguous"]):
+            assert x["best"] == y["best"]
+            assert np.linalg.norm(np.subtract(x["location"], y["location"])) < 0.1
 
 
 def test_fast_vs_paper_bench_writes_its_table_and_plot(tmp_path):
@@ -174,8 +340,6 @@ def test_scale_bench_reports_top1_top3_and_time_by_model_count(tmp_path, monkeyp
     from tactrec.bench import scale
 
     db = build_entries(["banana", "pear", "apple"])
-    for entry in db.entries:
-        mesh_fast.prepare(entry.model)
     monkeypatch.setattr(scale, "_database", lambda: db)
     monkeypatch.setattr(scale, "ycb_names", lambda: ("banana", "pear", "apple"))
     monkeypatch.setattr(scale, "SIZES", (2,))
@@ -200,17 +364,6 @@ def test_baselines_need_open3d_or_run(tmp_path):
     table = baselines.run(out=tmp_path, instances=1, models=("banana", "pear"), protocols=("p3",), quiet=True)
     assert set(table["summary"]["p3"]) == set(baselines.METHODS)
     assert table["summary"]["p3"]["fast"]["success_percent"] == 100.0
-
-
-def test_starting_poses_put_the_contact_on_candidate_vertices(scans):
-    m = scans.get("pear").model
-    touch = simulate_touch(m, [2023], points=81, spacing=0.3, angle=60.0, rng=1)
-    geom = estimate(touch)
-    R, t = mesh_fast.starting_poses(m, geom, touch.points, count=10)
-    assert 20 <= len(R) <= 120
-    contacts = np.einsum("hij,j->hi", R, geom.contact) + t
-    assert np.max(m.distance(contacts)) < 1e-9                      # each start sits on a vertex
-    assert np.allclose(np.einsum("hji,hjk->hik", R, R), np.eye(3), atol=1e-9)
 
 
 def test_fit_limit_classifies_each_touch(tmp_path):
@@ -244,185 +397,3 @@ def test_fit_limit_paired_gap_tells_a_tie_from_a_better_fit():
     farther = truth + 0.01 + rng.normal(0.0, 0.005, 300)
     assert paired_gap(farther, truth) > 10.0 and paired_gap(truth, farther) < -10.0
     assert paired_gap(truth, truth) == 0.0 and paired_gap(np.full(5, 0.5), np.full(5, 0.25)) == np.inf
-
-
-def test_wider_search_rescues_a_touch_across_a_crease():
-    """At this strawberry vertex the estimated normal is far off: the first search fits nothing,
-    and the wider search (tilted normals, every 30 degrees) finds the true pose."""
-    entry = build_entries(["strawberry"]).get("strawberry")
-    touch = simulate_touch(entry.model, [6915], points=81, spacing=0.3, angle=60.0, rng=instance_rng(0, 3, 5))
-    geom = estimate(touch)
-    first = mesh_fast.register(entry.model, entry.table, geom, touch.points, curves=touch.curves)
-    assert mesh_fast.needs_rescue(first.error, geom, touch.points)
-    wide = mesh_fast.rescue(entry.model, entry.table, geom, touch.points, curves=touch.curves, bound=first.error)
-    assert wide.ok and wide.error < 1e-3 < first.error
-    assert np.linalg.norm(wide.location - touch.meta["truth"]["contact"]) < 0.05
-    fitted = mesh_fast.rescue(entry.model, entry.table, geom, touch.points, curves=touch.curves, bound=wide.error)
-    assert not fitted.ok and "fits already" in fitted.rejected
-
-
-def test_the_rescue_is_decided_by_the_first_search_not_the_widened_one(monkeypatch):
-    """The strawberry crease touch: nothing fits in the first search.  Even if the widened search
-    (on a few best-ranked models) then settles it on another model within the rescue's limit,
-    the rescue on every model runs and finds the true pose on the strawberry."""
-    entries = build_entries(["strawberry", "pear"])
-    touch = simulate_touch(entries.get("strawberry").model, [6915], points=81, spacing=0.3, angle=60.0,
-                           rng=instance_rng(0, 3, 5))
-    settled = []
-
-    def widened(ranking, models, *args):
-        # as if the widened search had found a pose on the pear just within the rescue's limit
-        pear = next(r for r in ranking if r.model == "pear")
-        radius = mesh_fast._touch_radius(estimate(touch), touch.points)
-        fit = dataclasses.replace(pear, error=0.9 * mesh_fast.DEFAULTS["hard"] * radius * pear.scale,
-                                  rejected=None)
-        settled.append(fit)
-        return sorted([fit] + [r for r in ranking if r.model != "pear"], key=recognition._rank_key)
-
-    monkeypatch.setattr(recognition, "_widened", widened)
-    rec = recognize(touch, entries, workers=1)
-    assert settled and rec.best == "strawberry" and rec.ranking[0].error < 1e-3
-
-
-def test_widened_search_finds_a_flat_patch_the_curvature_ranks_low():
-    """On this flat face of a Duplo brick the curvature ranks the true place low: the first
-    search fits loosely (0.05 mm), about as well as other bricks do; the widened search (more
-    candidates, every rotation) finds the true pose."""
-    entry = build_entries(["lego_duplo-c"]).get("lego_duplo-c")
-    touch = simulate_touch(entry.model, [430], points=81, spacing=0.3, angle=60.0, rng=instance_rng(0, 33, 0))
-    geom = estimate(touch)
-    first = mesh_fast.register(entry.model, entry.table, geom, touch.points, curves=touch.curves)
-    assert first.ok and first.error > 0.02
-    # a loose best with a close runner-up widens the search over the models near it, a clear winner does not
-    assert mesh_fast.widen_scope([first.error, 1.1 * first.error, 2.0 * first.error, 9.0 * first.error],
-                                 geom, touch.points) == 3
-    assert mesh_fast.widen_scope([first.error, 5.0 * first.error], geom, touch.points) == 0
-    assert mesh_fast.widen_scope([1e-4, 1.1e-4], geom, touch.points) == 0                     # fits
-    assert mesh_fast.widen_scope([first.error, first.error], geom, touch.points, noise=first.error) == 0   # noise
-    assert mesh_fast.widen_scope([1.0, 1.0], geom, touch.points) == 2                  # no fit: widened, then rescued
-    # at most `rivals` models for a loose fit; a touch that nothing fits takes every model within reach
-    rivals = mesh_fast.DEFAULTS["rivals"]
-    assert mesh_fast.widen_scope(np.full(rivals + 8, first.error), geom, touch.points) == rivals
-    assert mesh_fast.widen_scope(np.r_[np.ones(rivals + 8), 4.0], geom, touch.points) == rivals + 8
-    wide = mesh_fast.widen(entry.model, entry.table, geom, touch.points, curves=touch.curves, bound=first.error)
-    assert wide.ok and wide.error < 1e-3
-    assert np.linalg.norm(wide.location - touch.meta["truth"]["contact"]) < 0.05
-
-
-def test_the_widened_search_runs_on_the_models_its_scope_names(scans, monkeypatch):
-    """Recognition runs the widened search on exactly the best-ranked accepted models the
-    widener's scope counts, and on none when the scope is empty."""
-    from tactrec.registration import WIDENERS, Registration
-
-    touch = simulate_touch(scans.get("pear").model, [2023], points=61, spacing=0.3, angle=60.0, rng=2)
-    first = recognize(touch, scans, workers=1)
-    ranked = [r.model for r in first.ranking if r.ok]
-    assert len(ranked) >= 2
-    searched = []
-
-    def widen(model, *args, **options):
-        searched.append(model.name)
-        return Registration.rejection(model.name, "recorded")
-
-    for count in (2, 0):
-        searched.clear()
-        monkeypatch.setitem(WIDENERS["fast"], "mesh", (lambda *args, count=count, **options: count, widen,
-                                                           lambda *args: False))
-        again = recognize(touch, scans, workers=1)
-        assert sorted(set(searched)) == sorted(ranked[:count])
-        assert [(r.model, r.error) for r in again.ranking] == [(r.model, r.error) for r in first.ranking]
-
-
-def test_a_pruned_model_is_searched_again_before_the_search_is_widened():
-    """On this face of a coarse Duplo scan (4 mm edges) another brick fits loosely (0.06 mm).
-    Against that bound the first search prunes the true brick on its cheap score (3.8x);
-    without the bound it refines to about twice the best, within the widened search's
-    reach, and the widened search then fits it better than the other brick."""
-    entries = build_entries(["lego_duplo-a", "lego_duplo-g"])
-    truth = entries.get("lego_duplo-g")
-    touch = simulate_touch(truth.model, [282], points=81, spacing=0.3, angle=60.0, rng=instance_rng(0, 37, 0))
-    geom = estimate(touch)
-    other = recognition.register_on_model(entries.get("lego_duplo-a"), touch, geom)
-    best = other.error
-    assert other.ok and mesh_fast.widen_scope([best, 1.5 * best], geom, touch.points) == 2      # a loose fit
-    pruned = recognition.register_on_model(truth, touch, geom, bound=best)
-    assert not pruned.ok and "pruned" in pruned.rejected and pruned.cheap > mesh_fast.DEFAULTS["prune"] * best
-    assert mesh_fast.revisit(pruned.cheap, best) and not mesh_fast.revisit(2 * mesh_fast.DEFAULTS["revisit"] * best,
-                                                                           best)
-    again = recognition.register_on_model(truth, touch, geom)
-    assert again.ok and best < again.error <= mesh_fast.DEFAULTS["reach"] * best
-    wide = recognition._on_model(mesh_fast.widen, truth, touch, geom, bound=np.inf)
-    assert wide.ok and wide.error < best          # (on one of the brick's like faces: the place is not told)
-
-
-def test_recognition_searches_the_pruned_models_again_when_the_widener_says_so(scans, monkeypatch):
-    """Before the widened search, recognition registers again, without the bound, exactly the
-    models the first search pruned whose cheap score the widener's ``revisit`` accepts."""
-    from tactrec.registration import METHODS, WIDENERS, Registration
-
-    touch = simulate_touch(scans.get("pear").model, [2023], points=61, spacing=0.3, angle=60.0, rng=2)
-    first = recognize(touch, scans, workers=1)
-    pruned = sorted(r.model for r in first.ranking if not r.ok and "pruned" in r.rejected)
-    assert pruned and all(np.isfinite(r.cheap) for r in first.ranking if r.model in pruned)
-    register, calls = METHODS["fast"]["mesh"], []
-
-    def spy(model, *args, bound=np.inf, **options):
-        calls.append((model.name, bound))
-        return register(model, *args, bound=bound, **options)
-
-    monkeypatch.setitem(METHODS["fast"], "mesh", spy)
-    made = {}
-    for accept in (True, False):
-        calls.clear()
-        monkeypatch.setitem(WIDENERS["fast"], "mesh", (lambda *args, **options: 1,
-                                                       lambda model, *a, **k: Registration.rejection(model.name, "-"),
-                                                       lambda cheap, best, accept=accept: accept))
-        recognize(touch, scans, workers=1)
-        made[accept] = Counter(calls)
-    extra = made[True] - made[False]
-    assert sorted({name for name, _ in extra}) == pruned
-    assert all(np.isinf(bound) for _, bound in extra) and not made[False] - made[True]
-
-
-def test_widened_search_steps_on_exact_distances_on_a_thin_wall(scans):
-    """On the mug's thin bottom most vertices near the contact lie on the inner surface and face
-    the other way, so steps towards the nearest vertex's plane lead away from the true pose: the
-    first search fits loosely; the widened one, on exact distances from its first step, finds
-    the true pose."""
-    entry = scans.get("mug")
-    touch = simulate_touch(entry.model, [2910], points=81, spacing=0.3, angle=60.0, outward=True,
-                           rng=instance_rng(0, 4, 4, 0))
-    geom = estimate(touch)
-    first = mesh_fast.register(entry.model, entry.table, geom, touch.points, curves=touch.curves)
-    assert first.ok and first.error > 0.015
-    wide = mesh_fast.widen(entry.model, entry.table, geom, touch.points, curves=touch.curves, bound=first.error)
-    assert wide.ok and wide.error < 0.005
-    assert np.linalg.norm(wide.location - touch.meta["truth"]["contact"]) < 0.5
-
-
-def test_a_broken_worker_pool_falls_back_to_this_process(scans, monkeypatch):
-    from concurrent.futures.process import BrokenProcessPool
-
-    class Broken:
-        def submit(self, *args):
-            raise BrokenProcessPool("a worker died")
-
-    touch = simulate_touch(scans.get("pear").model, [2023], points=61, spacing=0.3, angle=60.0, rng=2)
-    expected = recognize(touch, scans, workers=1)
-    monkeypatch.setattr(recognition, "_workers", lambda models, workers: Broken())
-    again = recognize(touch, scans, workers=2)
-    assert [(r.model, r.error) for r in again.ranking] == [(r.model, r.error) for r in expected.ranking]
-
-
-def _pool_inside_a_worker() -> bool:
-    return recognition._workers([], 2) is not None
-
-
-def test_no_worker_pool_is_forked_inside_another_pools_worker():
-    """A benchmark running touches in worker processes: the recognitions there run their shares
-    in turn instead of forking a pool of their own (which can deadlock)."""
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
-
-    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("fork")) as pool:
-        assert pool.submit(_pool_inside_a_worker).result(timeout=120) is False

@@ -10,7 +10,8 @@ from tactrec.cli import main
 from tactrec.database import load_database
 from tactrec.errors import InputError
 from tactrec.surfaces import load_model
-from tactrec.surfaces.mesh import MeshModel, clean_mesh
+from tactrec.surfaces.mesh import MeshModel
+from tactrec.surfaces.mesh_cleanup import clean_mesh
 
 
 def _model(tm, name="m"):
@@ -159,14 +160,20 @@ def test_ycb_scans_are_built_in_and_read_in_millimetres():
     assert banana.kind == "mesh" and banana.units == "mm" and 150 < banana.size < 300
 
 
-def test_a_method_without_registration_for_a_kind_is_a_clear_error():
-    from tactrec.registration import get_registrar
+def test_an_unknown_method_or_option_is_a_clear_error():
+    from tactrec.methods import get_method
 
-    assert get_registrar("paper", "mesh") is not None
-    with pytest.raises(InputError, match="cannot register onto volume models"):
-        get_registrar("paper", "volume")
+    assert get_method("paper").name == "paper"
     with pytest.raises(InputError, match="unknown method"):
-        get_registrar("nonesuch", "mesh")
+        get_method("nonesuch")
+    with pytest.raises(InputError, match="has no option 'delat' \\(did you mean 'delta'\\?\\)"):
+        get_method("paper").configure(delat=0.1)
+    with pytest.raises(InputError, match="delta must be positive"):
+        get_method("paper").configure(delta=-1.0)
+    with pytest.raises(InputError, match="has no option 'delta'"):
+        get_method("fast").configure(delta=0.1)
+    with pytest.raises(InputError, match="budget must be"):
+        get_method("fast").configure(budget=0)
 
 
 def test_touch_anywhere_on_a_face_of_a_scan(tmp_path):
@@ -228,7 +235,7 @@ def _reference_error(m, problem, v, phi):
     chained into polylines, the one through the anchor resampled at the offsets."""
     import trimesh
 
-    from tactrec.surfaces.mesh import resample_polyline
+    from tactrec.surfaces.mesh_sections import resample_polyline
 
     tm = trimesh.Trimesh(m.vertices, m.faces, process=False)
     F = m.vertex_frames([v])[0]

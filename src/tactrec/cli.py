@@ -93,20 +93,26 @@ def _recognition_options(args) -> dict:
     options = {}
     if args.delta is not None:
         options["delta"] = args.delta
+    if args.budget is not None:
+        options["budget"] = args.budget
     return options
 
 
 def cmd_recognize(args) -> int:
     from .database import open_models
     from .io.touch import load_touch
-    from .recognition import recognize
+    from .methods import get_method
+    from .recognition import Recognizer, default_workers
 
     if (args.db is None) == (not args.models):
         raise InputError("give either --db DB or --models MODEL...", "tactrec recognize")
+    get_method(args.method).configure(**_recognition_options(args))    # a bad option before any work
     touches = [load_touch(path) for path in args.data]          # validate everything first
     db = open_models(db=args.db, models=args.models, warn=_warn, quiet=args.quiet, units=args.units,
                      scale=args.scale)
-    results = [recognize(t, db, method=args.method, **_recognition_options(args)) for t in touches]
+    workers = default_workers() if len(db) > 4 else 1
+    with Recognizer(db, method=args.method, workers=workers, **_recognition_options(args)) as recognizer:
+        results = [recognizer.recognize(t) for t in touches]
     out_lines = []
     for path, result in zip(args.data, results):
         if args.json:
@@ -120,6 +126,8 @@ def cmd_recognize(args) -> int:
 def _format_result(name: str, result) -> str:
     est = result.estimate
     flag = ", ambiguous: the runner-up fits within the noise" if result.ambiguous else ""
+    if not result.settled:
+        flag += ", unsettled: the search's budget ran out before a fit within the noise"
     lines = [f"{name}: {'best ' + result.best if result.best else 'no model matches'}"
              f"   (k1 {est.k1:.4g}, k2 {est.k2:.4g}; {result.seconds:.2f} s, method {result.method}{flag})"]
     for rank, r in enumerate(result.ranking, start=1):
@@ -203,7 +211,7 @@ def _mesh_options(p) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from .registration import DEFAULT_METHOD, METHODS
+    from .methods import DEFAULT_METHOD, METHODS
 
     parser = _Parser(prog="tactrec", description="Recognise an object and locate a touch on it from three "
                      "(or more) concurrent tactile curves (Ibrayev & Jia).")
@@ -233,6 +241,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--method", choices=sorted(METHODS), default=DEFAULT_METHOD,
                    help=f"registration method (default {DEFAULT_METHOD})")
     p.add_argument("--delta", type=_positive, help="lookup tolerance on (k1, k2), 1/model units (method paper)")
+    p.add_argument("--budget", type=_count(1), help="the search's budget in closest-point queries "
+                   "(method fast; default 4000000, about 3 s here): more buys certainty with time")
     _mesh_options(p)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_recognize)

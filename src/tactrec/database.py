@@ -35,7 +35,7 @@ __all__ = ["Database", "BuildReport", "build_database", "load_database", "build_
            "open_models", "cache_folder", "cached_database"]
 
 FORMAT = "tactrec-db"
-VERSION = 1
+VERSION = 2            # 2: meshes store their fitted normals; the fast method's search needs them
 #: bump when table construction changes, so that old tables are rebuilt
 TABLE_VERSION = 2
 
@@ -131,7 +131,8 @@ def _read_index(db: Path) -> dict:
     if not isinstance(index, dict) or index.get("format") != FORMAT or not isinstance(index.get("models"), list):
         raise InputError("corrupted database index (not a tactrec database)", index_path)
     if index.get("version") != VERSION:
-        raise InputError(f"database version {index.get('version')!r} is not {VERSION}; rebuild it", index_path)
+        raise InputError(f"database format version {index.get('version')!r}, this tactrec reads version {VERSION}: "
+                         "rebuild it with 'tactrec build'", index_path)
     for item in index["models"]:
         if not isinstance(item, dict) or not all(isinstance(item.get(k), str) for k in
                                                  ("name", "kind", "file", "source", "source_sha256", "file_sha256")):

@@ -16,7 +16,7 @@ import time
 import numpy as np
 
 from .database import cached_database
-from .recognition import recognize
+from .recognition import Recognizer, default_workers
 from .simulation import simulate_touch
 from .surfaces import BUILTIN_SETS
 
@@ -37,7 +37,8 @@ def run_demo(*, seed: int = 0, out="tactrec-demo.png", quiet: bool = True) -> di
     points = int(round(LENGTH / SPACING)) + 1
     touch = simulate_touch(model, [vertex], points=points, spacing=SPACING, angle=ANGLE, rng=rng)
     truth = touch.meta["truth"]
-    result = recognize(touch, db)
+    with Recognizer(db, workers=default_workers()) as recognizer:
+        result = recognizer.recognize(touch)
     lines = [f"models: {len(db)} built-in ({len(scans)} YCB scans, {len(db) - len(scans)} closed-form surfaces), "
              f"ready in {loaded:.1f} s",
              f"touched: {model.name} at vertex {vertex}, ({', '.join(f'{x:.1f}' for x in truth['contact'])}) mm; "

@@ -29,9 +29,8 @@ import numpy as np
 
 from ..errors import InputError
 from ..estimation import estimate
-from ..recognition import recognize
 from ..registration import mesh_fast
-from .common import run_parallel, write_json
+from .common import recognizer, run_parallel, write_json
 from .fast_vs_paper import PROTOCOLS, _database, _simulate
 
 __all__ = ["run", "open3d", "METHODS"]
@@ -142,7 +141,7 @@ def _touch(task):
     results = {}
     for method in methods:
         if method == "fast":
-            rec = recognize(touch, db.entries)
+            rec = recognizer(db.entries).recognize(touch)
             winner, seconds = rec.best, rec.seconds
         else:
             winner, seconds = _recognise_with(o3d, method, db, touch, seed=seed)

@@ -15,7 +15,21 @@ import numpy as np
 from ..io.atomic import write_text_atomic
 
 __all__ = ["paper_values", "instance_rng", "run_parallel", "write_json", "default_jobs", "sources_hash",
-           "saved_record"]
+           "saved_record", "recognizer"]
+
+#: the recognizers a benchmark process keeps, by models and options (their worker processes end with it)
+_RECOGNIZERS: dict = {}
+
+
+def recognizer(models, *, method: str = "fast", **options):
+    """A :class:`~tactrec.recognition.Recognizer` for ``models`` (a list of entries) kept for the rest of
+    this process: its models are prepared and its worker processes started once."""
+    from ..recognition import Recognizer, default_workers
+
+    key = (tuple(id(e) for e in models), method, tuple(sorted(options.items())))
+    if key not in _RECOGNIZERS:
+        _RECOGNIZERS[key] = (Recognizer(models, method=method, workers=default_workers(), **options), list(models))
+    return _RECOGNIZERS[key][0]
 
 
 def paper_values() -> dict:

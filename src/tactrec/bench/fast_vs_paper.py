@@ -30,11 +30,10 @@ import numpy as np
 
 from ..database import build_entries
 from ..errors import InputError
-from ..recognition import recognize
 from ..registration import mesh_fast
 from ..simulation import simulate_touch, spread_vertices
 from ..surfaces import BUILTIN_SETS
-from .common import instance_rng, run_parallel, saved_record, sources_hash, write_json
+from .common import instance_rng, recognizer, run_parallel, saved_record, sources_hash, write_json
 
 __all__ = ["run", "PROTOCOLS", "METHODS"]
 
@@ -91,7 +90,7 @@ def _touch(task):
     for method in methods:
         start = time.perf_counter()
         try:
-            rec = recognize(touch, db.entries, method=method)
+            rec = recognizer(db.entries, method=method).recognize(touch)
         except InputError as exc:
             results[method] = {"recognized": None, "correct": False, "seconds": time.perf_counter() - start,
                                "failed": str(exc)}

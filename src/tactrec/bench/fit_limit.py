@@ -37,12 +37,11 @@ from pathlib import Path
 import numpy as np
 
 from ..io.atomic import write_text_atomic
-from ..recognition import recognize
 from ..registration import mesh_fast
 from ..registration.result import apply_poses
 from ..surfaces import BUILTIN_SETS
 from ..units import conversion
-from .common import run_parallel, saved_record, sources_hash, write_json
+from .common import recognizer, run_parallel, saved_record, sources_hash, write_json
 from .fast_vs_paper import PROTOCOLS, _database, _simulate
 
 __all__ = ["run"]
@@ -74,13 +73,13 @@ def _touch(task) -> dict:
     db = _database(models)
     entry = db.entries[m_index]
     site, touch = _simulate(entry, m_index, instance, seed, protocol)
-    rec = recognize(touch, db.entries)
+    rec = recognizer(db.entries).recognize(touch)
     errors = {r.model: r.error / r.scale for r in rec.ranking if r.ok}
     truth = touch.meta["truth"]
     scale = conversion(touch.units, getattr(entry.model, "units", None))
     R = np.asarray(truth["rotation"], dtype=np.float64)[None]
     t = np.asarray(truth["translation"], dtype=np.float64)[None] * scale
-    R, t, refined = mesh_fast.refine(entry.model, R, t, touch.points * scale, iterations=30)
+    R, t, refined, _ = mesh_fast.refine(entry.model, R, t, touch.points * scale, iterations=30)
     truth_error = float(refined[0]) / scale
     own = min(truth_error, errors.get(entry.name, np.inf))
     others = min((e for name, e in errors.items() if name != entry.name), default=np.inf)

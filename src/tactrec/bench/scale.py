@@ -22,11 +22,10 @@ from pathlib import Path
 import numpy as np
 
 from ..database import cached_database
-from ..recognition import recognize
 from ..registration import mesh_fast
 from ..simulation import simulate_touch, spread_vertices
 from ..surfaces import ycb_names
-from .common import instance_rng, run_parallel, saved_record, write_json
+from .common import instance_rng, recognizer, run_parallel, saved_record, write_json
 from .fast_vs_paper import _code_hash
 
 __all__ = ["run_scale", "run_exhaustive", "SIZES"]
@@ -73,9 +72,9 @@ def _scale_task(task):
     entry = entries[m_index]
     vertex, touch = _touch(entry, m_index, instance, seed)
     record = {"model": entry.name, "vertex": vertex, "instance": instance,
-              "all": _outcome(recognize(touch, entries), entry.name)}
+              "all": _outcome(recognizer(entries).recognize(touch), entry.name)}
     if m_index in order[:10]:
-        record["sizes"] = {str(k): _outcome(recognize(touch, [entries[i] for i in order[:k]]), entry.name)
+        record["sizes"] = {str(k): _outcome(recognizer([entries[i] for i in order[:k]]).recognize(touch), entry.name)
                            for k in sizes if k < len(entries)}
     return record
 
@@ -86,8 +85,9 @@ def _exhaustive_task(task):
     entry = db.entries[m_index]
     vertex, touch = _touch(entry, m_index, 0, seed)
     return {"model": entry.name, "vertex": vertex,
-            "fast": _outcome(recognize(touch, db.entries), entry.name),
-            "exhaustive": _outcome(recognize(touch, db.entries, exhaustive=True, refine_poses=64), entry.name)}
+            "fast": _outcome(recognizer(db.entries).recognize(touch), entry.name),
+            "exhaustive": _outcome(recognizer(db.entries, exhaustive=True, refine=64).recognize(touch),
+                                   entry.name)}
 
 
 def _saved(job):

@@ -22,6 +22,7 @@ import numpy as np
 from ..errors import InputError
 from ..units import unit_scale
 from .atomic import write_text_atomic
+from .meeting import check_meeting
 
 __all__ = ["TactileData", "load_touch", "save_touch", "MIN_CURVES", "MIN_POINTS"]
 
@@ -218,10 +219,8 @@ def load_touch(path: str | os.PathLike) -> TactileData:
     """Load a touch from a ``.json`` or ``.csv`` file and validate it.
 
     The curves must meet at one point (checked here, see
-    :func:`tactrec.estimation.find_contact`).
+    :func:`tactrec.io.meeting.find_contact`).
     """
-    from ..estimation import check_meeting  # local: estimation imports this module
-
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix not in {".json", ".csv"}:

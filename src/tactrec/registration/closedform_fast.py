@@ -57,7 +57,7 @@ def refine(model: ClosedFormSurface, R: np.ndarray, t: np.ndarray, x: np.ndarray
         active[~np.isin(np.arange(len(active)), a)] = False
         if len(a) == 0:
             break
-        R[a], t[a], step = point_to_plane_step(R[a], t[a], y, fg[..., 1:] / norm[..., None], fg[..., 0] / norm)
+        R[a], t[a], step, _ = point_to_plane_step(R[a], t[a], y, fg[..., 1:] / norm[..., None], fg[..., 0] / norm)
         small = np.max(np.abs(step), axis=1) < 1e-12 * max(1.0, model.size)
         active[a[small]] = False
     y = apply_poses(R, t, x)

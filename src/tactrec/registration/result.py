@@ -6,6 +6,8 @@ import dataclasses
 
 import numpy as np
 
+from ..linalg import compose, gram, rotate, solve_spd, transform
+
 __all__ = ["Registration", "local_frame", "rotations_z", "rotations_from_vectors", "point_to_plane_step",
            "apply_poses"]
 
@@ -130,11 +132,11 @@ def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def apply_poses(R: np.ndarray, t: np.ndarray, x: np.ndarray) -> np.ndarray:
     """Points ``x (m, 3)`` under each pose ``R (h, 3, 3), t (h, 3)``: ``(h, m, 3)``."""
-    return np.matmul(x, np.swapaxes(R, 1, 2)) + t[:, None, :]
+    return transform(R, t, np.asarray(x, dtype=np.float64))
 
 
 def point_to_plane_step(R: np.ndarray, t: np.ndarray, moved: np.ndarray, normals: np.ndarray,
-                        residuals: np.ndarray, *, predict: bool = False):
+                        residuals: np.ndarray):
     """One damped Gauss-Newton (Levenberg-Marquardt) step on poses ``R (h, 3, 3), t (h, 3)``.
 
     ``moved (h, m, 3)`` are the data points under the poses, ``normals (h, m, 3)``
@@ -142,19 +144,16 @@ def point_to_plane_step(R: np.ndarray, t: np.ndarray, moved: np.ndarray, normals
     (h, m)`` their signed distances.  The step is a small rotation about the
     origin and a translation, linearised as ``r + (y x n) . w + n . v``; the
     damping keeps directions that a flat or cylindrical patch leaves
-    unconstrained from running away.  Returns the new poses and the steps
-    ``(h, 6)``; with ``predict``, also the residuals the linearisation predicts
-    after them ``(h, m)``.
+    unconstrained from running away.  Returns the new poses, the steps
+    ``(h, 6)`` and the residuals the linearisation predicts after them ``(h, m)``.
+    The arithmetic is element-wise (:mod:`tactrec.linalg`): the same on every CPU.
     """
     J = np.empty(moved.shape[:2] + (6,))                                              # (h, m, 6)
     J[..., :3] = cross(moved, normals)
     J[..., 3:] = normals
-    Jt = np.swapaxes(J, 1, 2)
-    JtJ = Jt @ J
+    JtJ, Jtr = gram(J, residuals)
     damp = 1e-6 * (np.trace(JtJ, axis1=1, axis2=2)[:, None, None] / 6.0 + 1e-12)
-    step = np.linalg.solve(JtJ + damp * np.eye(6), -(Jt @ residuals[..., None]))[..., 0]
+    step = solve_spd(JtJ + damp * np.eye(6), -Jtr)
     dR = rotations_from_vectors(step[:, :3])
-    R, t = dR @ R, np.einsum("hij,hj->hi", dR, t) + step[:, 3:]
-    if predict:
-        return R, t, step, residuals + (J @ step[..., None])[..., 0]
-    return R, t, step
+    R, t = compose(dR, R), rotate(dR, t) + step[:, 3:]
+    return R, t, step, residuals + np.sum(J * step[:, None, :], axis=2)

@@ -30,24 +30,13 @@ from scipy import sparse
 
 from ..errors import InputError
 from .base import SiteFrame, SurfaceModel, TableSamples
+from .mesh_cleanup import clean_mesh
+from .mesh_curvature import CurvatureField, curvature_field, paraboloid_curvatures, tangents, unit_rows
+from .mesh_sections import resample_polyline, segment_distance
 
 __all__ = ["MeshModel", "MESH_SUFFIXES", "paraboloid_curvatures", "resample_polyline"]
 
 MESH_SUFFIXES = (".ply", ".obj", ".stl", ".off")
-STRAY_FRACTION = 0.01
-
-
-def _unit_rows(a: np.ndarray) -> np.ndarray:
-    norm = np.linalg.norm(a, axis=-1, keepdims=True)
-    return a / np.where(norm > 0, norm, 1.0)
-
-
-def _tangents(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``d1, d2 (n, 3)`` completing unit ``normal (n, 3)`` to right-handed frames:
-    ``d1`` is the coordinate axis least aligned with the normal, projected."""
-    helper = np.eye(3)[np.argmin(np.abs(normal), axis=1)]
-    d1 = _unit_rows(helper - np.sum(helper * normal, axis=1, keepdims=True) * normal)
-    return d1, np.cross(normal, d1)
 
 
 class MeshModel(SurfaceModel):
@@ -123,10 +112,11 @@ class MeshModel(SurfaceModel):
 
     # ------------------------------------------------------------------ storage
     def to_store(self) -> dict[str, np.ndarray]:
-        k1, k2, d1, radius = self.fine_curvatures
+        f = self.fine_curvatures
         return {"mesh_vertices": self.vertices, "mesh_faces": self.faces,
                 "mesh_units": np.array(self.units or ""), "mesh_scale": np.array(self.scale),
-                "mesh_k1": k1, "mesh_k2": k2, "mesh_d1": d1, "mesh_fit_radius": np.array(radius)}
+                "mesh_k1": f.k1, "mesh_k2": f.k2, "mesh_d1": f.d1, "mesh_normal": f.normal,
+                "mesh_fit_radius": np.array(f.radius)}
 
     @classmethod
     def from_store(cls, arrays, *, name: str, source: str) -> "MeshModel":
@@ -136,21 +126,20 @@ class MeshModel(SurfaceModel):
             raise ValueError("mesh faces do not index its vertices")
         units = str(arrays["mesh_units"]) or None
         model = cls(vertices, faces, name=name, units=units, source=source, scale=float(arrays["mesh_scale"]))
-        if "mesh_k1" in arrays:
-            field = (np.asarray(arrays["mesh_k1"], dtype=np.float64), np.asarray(arrays["mesh_k2"], dtype=np.float64),
-                     np.asarray(arrays["mesh_d1"], dtype=np.float64), float(arrays["mesh_fit_radius"]))
-            n = len(model.vertices)
-            if field[0].shape != (n,) or field[1].shape != (n,) or field[2].shape != (n, 3) \
-                    or not all(np.all(np.isfinite(a)) for a in field[:3]):
-                raise ValueError("the stored curvature field does not match the mesh")
-            model.__dict__["fine_curvatures"] = field
+        field = CurvatureField(*(np.asarray(arrays[f"mesh_{k}"], dtype=np.float64) for k in ("k1", "k2", "d1", "normal")),
+                               float(arrays["mesh_fit_radius"]))
+        n = len(model.vertices)
+        if field.k1.shape != (n,) or field.k2.shape != (n,) or field.d1.shape != (n, 3) \
+                or field.normal.shape != (n, 3) or not all(np.all(np.isfinite(a)) for a in field[:4]):
+            raise ValueError("the stored curvature field does not match the mesh")
+        model.__dict__["fine_curvatures"] = field
         return model
 
     # ------------------------------------------------------------------ geometry
     @cached_property
     def face_normals(self) -> np.ndarray:
         v = self.vertices[self.faces]
-        return _unit_rows(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]))
+        return unit_rows(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]))
 
     @cached_property
     def vertex_normals(self) -> np.ndarray:
@@ -158,7 +147,7 @@ class MeshModel(SurfaceModel):
         acc = np.zeros_like(self.vertices)
         for k in range(3):
             np.add.at(acc, self.faces[:, k], self.face_normals)
-        return _unit_rows(acc)
+        return unit_rows(acc)
 
     @cached_property
     def adjacency(self) -> sparse.csr_matrix:
@@ -297,28 +286,6 @@ class MeshModel(SurfaceModel):
                                                  sizes=sizes)
         return k1, k2
 
-    def curvature_field(self, *, radius: float | None = None, most: int = 96
-                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Principal curvatures and the first principal direction at every vertex.
-
-        One weighted paraboloid fit (eq. 14) per vertex to the vertices within
-        ``radius`` (default three mean edges; at most ``most`` of them, at least
-        the nearest 12) whose normals agree with its own, so a thin wall's
-        other side is left out; all vertices at once.  Returns ``k1, k2 (V,)``
-        (``k1 >= k2``, outward normals) and ``d1 (V, 3)``, a unit tangent.
-        """
-        radius = 3.0 * self.mean_edge if radius is None else float(radius)
-        count = min(most, len(self.vertices))
-        dist, idx = self.vertex_tree.query(self.vertices, k=count)
-        frames = self.vertex_frames(np.arange(len(self.vertices)))                     # (V, 3, 3) [t1 t2 n]
-        local = np.einsum("vkj,vji->vki", self.vertices[idx] - self.vertices[:, None, :], frames)
-        agree = np.einsum("vkj,vj->vk", self.vertex_normals[idx], self.vertex_normals) > 0.5
-        weight = (agree & ((dist <= radius) | (np.arange(count) < 12))).astype(float)
-        k1, k2, (u, v) = quadric_curvatures(local, weight)
-        t1, t2, n = frames[:, :, 0], frames[:, :, 1], frames[:, :, 2]
-        d1 = u[:, None] * t1 + v[:, None] * t2 + 0.0 * n
-        return k1, k2, _unit_rows(d1)
-
     @cached_property
     def vertex_tree(self):
         """A k-d tree (scipy ``cKDTree``) over the vertices."""
@@ -327,12 +294,13 @@ class MeshModel(SurfaceModel):
         return cKDTree(self.vertices)
 
     @cached_property
-    def fine_curvatures(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
-        """:meth:`curvature_field` at three mean edges, and that radius: ``k1, k2 (V,), d1 (V, 3), radius``.
+    def fine_curvatures(self) -> CurvatureField:
+        """The :class:`~.mesh_curvature.CurvatureField` at three mean edges: every vertex's paraboloid
+        fit, its principal curvatures and directions and its fitted normal.
 
         Kept in a database, so a recognition does not recompute it."""
-        radius = 3.0 * self.mean_edge
-        return (*self.curvature_field(radius=radius), radius)
+        return curvature_field(self.vertices, self.vertex_normals, self.vertex_tree,
+                               self.vertex_frames(np.arange(len(self.vertices))), radius=3.0 * self.mean_edge)
 
     def table_samples(self, *, resolution=None, rng=0) -> TableSamples:
         """The paper's mesh table: sampled vertices with fitted curvatures."""
@@ -382,16 +350,16 @@ class MeshModel(SurfaceModel):
             b = np.array([1.0 - site[1] - site[2], site[1], site[2]])
             corners = self.faces[f]
             point = b @ self.vertices[corners]
-            normal = _unit_rows(b @ self.vertex_normals[corners])
+            normal = unit_rows(b @ self.vertex_normals[corners])
         else:
             raise ValueError("a mesh site is [vertex] or [face, b1, b2]")
-        d1, d2 = _tangents(normal[None])
+        d1, d2 = tangents(normal[None])
         return SiteFrame(site, point, d1[0], d2[0], normal)
 
     def vertex_frames(self, vertices) -> np.ndarray:
         """``(n, 3, 3)`` frames of ``vertices (n,)``, columns ``[d1 d2 n]`` as in :meth:`site_frame`."""
         normal = self.vertex_normals[np.asarray(vertices, dtype=np.int64)]
-        d1, d2 = _tangents(normal)
+        d1, d2 = tangents(normal)
         return np.stack([d1, d2, normal], axis=2)
 
     def locate(self, point) -> np.ndarray:
@@ -413,7 +381,7 @@ class MeshModel(SurfaceModel):
         its normal and ``tangent``, at equal arc length, centred on the site."""
         frame = self.site_frame(site)
         p, n = frame.point, frame.normal
-        t = _unit_rows(np.asarray(tangent, dtype=float) - (np.asarray(tangent, dtype=float) @ n) * n)
+        t = unit_rows(np.asarray(tangent, dtype=float) - (np.asarray(tangent, dtype=float) @ n) * n)
         m = np.cross(n, t)
         section = self._trimesh.section(plane_origin=p, plane_normal=m)
         if section is None:
@@ -423,7 +391,7 @@ class MeshModel(SurfaceModel):
             line = np.asarray(entity.discrete(section.vertices), dtype=float)
             if len(line) < 2:
                 continue
-            d = _segment_distance(line, p)
+            d = segment_distance(line, p)
             if d < best_d:
                 best, best_d = line, d
         if best is None or best_d > 1e-6 * max(self.size, 1e-300) + 1e-9:
@@ -432,154 +400,3 @@ class MeshModel(SurfaceModel):
         return resample_polyline(best, p, t, offsets, closed=bool(np.allclose(best[0], best[-1])), strict=True)
 
 
-def _project_on_polyline(line: np.ndarray, p: np.ndarray) -> tuple[int, float, float]:
-    """Nearest segment ``k`` of ``line`` to ``p``, the parameter ``t`` in [0, 1]
-    of the nearest point on it, and the distance."""
-    a, b = line[:-1], line[1:]
-    ab = b - a
-    t = np.clip(np.sum((p - a) * ab, axis=1) / np.maximum(np.sum(ab * ab, axis=1), 1e-300), 0.0, 1.0)
-    dist = np.linalg.norm(a + t[:, None] * ab - p, axis=1)
-    k = int(np.argmin(dist))
-    return k, float(t[k]), float(dist[k])
-
-
-def _segment_distance(line: np.ndarray, p: np.ndarray) -> float:
-    """Distance from ``p`` to the polyline ``line``."""
-    return _project_on_polyline(line, p)[2]
-
-
-def resample_polyline(line: np.ndarray, anchor: np.ndarray, along: np.ndarray, offsets: np.ndarray, *,
-                      closed: bool, strict: bool = False) -> np.ndarray:
-    """Points of ``line`` at arc-length ``offsets`` from the point nearest ``anchor``,
-    positive offsets in the direction of ``along``.
-
-    On a closed loop the offsets wrap around; on an open line they stop at its
-    ends, or (``strict``) raise ``ValueError`` where they would run past them.
-    """
-    # repeated points (a plane through a mesh vertex) would leave the direction undefined
-    line = line[np.r_[True, np.linalg.norm(np.diff(line, axis=0), axis=1) > 0]]
-    seg = np.linalg.norm(np.diff(line, axis=0), axis=1)
-    arc = np.concatenate([[0.0], np.cumsum(seg)])
-    k, t, _ = _project_on_polyline(line, anchor)
-    direction = 1.0 if (line[k + 1] - line[k]) @ along >= 0 else -1.0
-    targets = arc[k] + t * seg[k] + direction * np.asarray(offsets, dtype=float)
-    if closed:
-        targets = np.mod(targets, arc[-1])
-    elif strict and (targets.min() < -1e-9 or targets.max() > arc[-1] + 1e-9):
-        raise ValueError("a section curve runs off the edge of the mesh")
-    return np.stack([np.interp(targets, arc, line[:, i]) for i in range(3)], axis=1)
-
-
-def clean_mesh(vertices: np.ndarray, faces: np.ndarray):
-    """Merge duplicate vertices, drop degenerate, repeated and out-of-range
-    faces and stray components (under 1 % of the faces), remove unreferenced
-    vertices.  Returns ``vertices, faces, report``."""
-    report = {"vertices_in": int(len(vertices)), "faces_in": int(len(faces))}
-    bad = (faces < 0) | (faces >= len(vertices))
-    if bad.any():
-        faces = faces[~bad.any(axis=1)]
-        report["faces_out_of_range"] = int(bad.any(axis=1).sum())
-    scale = float(np.ptp(vertices, axis=0).max()) or 1.0
-    key = np.round(vertices / (scale * 1e-9)).astype(np.int64)
-    _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
-    inverse = inverse.ravel()
-    report["duplicate_vertices_merged"] = int(len(vertices) - len(first))
-    vertices = vertices[first]
-    faces = inverse[faces]
-    tri = vertices[faces]
-    area2 = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
-    degenerate = (faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2]) | (faces[:, 0] == faces[:, 2]) \
-        | (area2 <= 1e-12 * scale * scale)
-    report["degenerate_faces_dropped"] = int(degenerate.sum())
-    faces = faces[~degenerate]
-    _, unique = np.unique(np.sort(faces, axis=1), axis=0, return_index=True)
-    report["repeated_faces_dropped"] = int(len(faces) - len(unique))
-    faces = faces[np.sort(unique)]
-    if len(faces):
-        # components by shared vertices
-        n = len(vertices)
-        m = len(faces)
-        inc = sparse.csr_matrix((np.ones(3 * m), (np.repeat(np.arange(m), 3), faces.ravel())), shape=(m, n))
-        graph = sparse.bmat([[None, inc], [inc.T, None]]).tocsr()
-        ncomp, labels = sparse.csgraph.connected_components(graph, directed=False)
-        face_labels = labels[:m]
-        counts = np.bincount(face_labels, minlength=ncomp)
-        keep_comp = counts >= max(1, STRAY_FRACTION * m)
-        keep = keep_comp[face_labels]
-        report["stray_components_dropped"] = int(np.sum((counts > 0) & ~keep_comp))
-        report["stray_faces_dropped"] = int((~keep).sum())
-        faces = faces[keep]
-    used = np.zeros(len(vertices), dtype=bool)
-    used[faces.ravel()] = True
-    remap = np.cumsum(used) - 1
-    report["unreferenced_vertices_removed"] = int((~used).sum())
-    vertices = vertices[used]
-    faces = remap[faces]
-    report["vertices"] = int(len(vertices))
-    report["faces"] = int(len(faces))
-    return vertices, faces, report
-
-
-def quadric_curvatures(local: np.ndarray, weight: np.ndarray):
-    """Principal curvatures at the origin of ``z = a x^2 + b xy + c y^2 + d x + e y + f``
-    fitted (weighted least squares) to points ``local (n, k, 3)`` given in
-    frames ``(t1, t2, N)``, ``n`` fits at once; ``weight (n, k)``.
-
-    Returns ``k1, k2 (n,)`` (``k1 >= k2``; a surface bending away from ``N``
-    has negative curvature) and the ``(t1, t2)`` components ``(2, n)`` of the
-    first principal direction, projected on the tangent plane and unit.
-    """
-    x, y, z = local[..., 0], local[..., 1], local[..., 2]
-    scale = np.maximum(np.max(np.hypot(x, y) * (weight > 0), axis=-1), 1e-12)[..., None]
-    X, Y = x / scale, y / scale
-    A = np.stack([X * X, X * Y, Y * Y, X, Y, np.ones_like(X)], axis=-1)               # (n, k, 6)
-    Aw = A * weight[..., None]
-    coef = np.linalg.solve(np.einsum("vki,vkj->vij", Aw, A) + 1e-12 * np.eye(6),
-                           np.einsum("vki,vk->vi", Aw, z)[..., None])[..., 0]
-    s = scale[..., 0]
-    a, b, c = coef[..., 0] / s**2, coef[..., 1] / s**2, coef[..., 2] / s**2
-    d, e = coef[..., 3] / s, coef[..., 4] / s
-    w = np.sqrt(1 + d * d + e * e)
-    E, F, G = 1 + d * d, d * e, 1 + e * e
-    L, M, N = 2 * a / w, b / w, 2 * c / w
-    det = E * G - F * F
-    H = (E * N - 2 * F * M + G * L) / (2 * det)
-    K = (L * N - M * M) / det
-    root = np.sqrt(np.maximum(H * H - K, 0.0))
-    k1, k2 = H + root, H - root
-    # (II - k1 I) v = 0, v from whichever row is larger; (1, 0) where the point is umbilic
-    r1 = np.stack([-(M - k1 * F), L - k1 * E])
-    r2 = np.stack([N - k1 * G, -(M - k1 * F)])
-    v = np.where(np.sum(r1 * r1, axis=0) >= np.sum(r2 * r2, axis=0), r1, r2)
-    norm = np.hypot(v[0], v[1])
-    v = np.where(norm > 1e-300, v / np.where(norm > 1e-300, norm, 1.0), np.array([[1.0], [0.0]]) * np.ones_like(norm))
-    return k1, k2, v
-
-
-def paraboloid_curvatures(center: np.ndarray, normal: np.ndarray, neighbours: np.ndarray, *,
-                          sizes=(30, 40, 50, 60, 70)) -> tuple[float, float]:
-    """Median principal curvatures of paraboloid fits (eq. 14) at ``center``.
-
-    ``neighbours`` (m, 3) are expressed in the frame (t1, t2, n) at ``center``
-    and sorted by distance; ``z = a x^2 + b xy + c y^2 + d x + e y + f`` is
-    fitted to the nearest ``s`` of them for each ``s`` in ``sizes`` (fewer if
-    the ring is smaller, at least 6); the principal curvatures of each fit at
-    the origin (Monge patch, ``k = c'' . n``) are reduced by medians, ``k1``
-    and ``k2`` separately.
-    """
-    n = normal / np.linalg.norm(normal)
-    (t1,), (t2,) = _tangents(n[None])
-    rel = neighbours - center
-    order = np.argsort(np.linalg.norm(rel, axis=1))
-    local = rel[order] @ np.stack([t1, t2, n]).T
-    counts = [s for s in sorted(set(min(s, len(local)) for s in sizes)) if s >= 6]
-    # a fit needs six independent monomials among its points
-    counts = [s for s in counts
-              if np.linalg.matrix_rank(np.stack([local[:s, 0] ** 2, local[:s, 0] * local[:s, 1], local[:s, 1] ** 2,
-                                                 local[:s, 0], local[:s, 1], np.ones(s)], axis=1)) == 6]
-    if not counts:
-        return float("nan"), float("nan")
-    weight = (np.arange(len(local))[None, :] < np.array(counts)[:, None]).astype(float)
-    k1, k2, _ = quadric_curvatures(np.broadcast_to(local, (len(counts), *local.shape)), weight)
-    arr = np.stack([k1, k2], axis=1)
-    return float(np.median(arr[:, 0])), float(np.median(arr[:, 1]))

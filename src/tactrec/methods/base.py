@@ -1,0 +1,92 @@
+"""What a recognition method is: one object with named hooks and a frozen, validated config.
+
+A method (:class:`Method`) turns one :class:`~tactrec.features.Touch` and a
+list of models into a ranking of :class:`~tactrec.registration.Registration`
+results, through these hooks:
+
+* :meth:`Method.configure` -- the method's :class:`Config` from keyword
+  options (an unknown or invalid option is an :class:`~tactrec.errors.InputError`);
+* :meth:`Method.prepare` -- per-model structures, built once (and kept in
+  the worker processes);
+* :meth:`Method.search` -- the registrations, given a :class:`Runner` that
+  runs a stage over the models in worker processes or in this one.
+
+A new method is its own module and one line in :data:`tactrec.methods.METHODS`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+from typing import Any, Callable, ClassVar, Protocol, Sequence
+
+from ..errors import InputError
+
+__all__ = ["Config", "Method", "Runner", "SearchOutcome"]
+
+
+@dataclasses.dataclass(frozen=True)
+class Config:
+    """Base of every method's options: frozen, checked when made."""
+
+    @classmethod
+    def from_options(cls, method: str, options: dict[str, Any]) -> "Config":
+        """The config with ``options`` set; an unknown name or a bad value is an InputError."""
+        names = [f.name for f in dataclasses.fields(cls)]
+        for key in options:
+            if key not in names:
+                near = difflib.get_close_matches(key, names, n=1)
+                hint = f" (did you mean {near[0]!r}?)" if near else f"; its options: {', '.join(names)}"
+                raise InputError(f"method {method!r} has no option {key!r}{hint}", "--method")
+        try:
+            return cls(**options)
+        except (TypeError, ValueError) as exc:
+            raise InputError(f"method {method!r}: {exc}", "--method") from None
+
+    def _check(self, name: str, ok: bool, what: str) -> None:
+        if not ok:
+            raise ValueError(f"{name} must be {what}, got {getattr(self, name)!r}")
+
+
+@dataclasses.dataclass(frozen=True)
+class SearchOutcome:
+    """What a method's search returns.
+
+    Attributes
+    ----------
+    ranking : list of Registration
+        One per model, in the models' order (recognition sorts them).
+    settled : bool
+        True when the search stopped by its rule (the best fits within the data's noise, or
+        nothing is left to explore); False when its budget ran out first.
+    work : int
+        Closest-point queries (or the method's own unit of work) spent.
+    depth : int
+        How many steps of its schedule the search ran (1 for a method without one).
+    """
+
+    ranking: list
+    settled: bool = True
+    work: int = 0
+    depth: int = 1
+
+
+class Runner(Protocol):
+    """Runs a stage over models, in worker processes or in this one."""
+
+    def map(self, stage: Callable[..., list], indices: Sequence[int], *args, items: Sequence | None = None) -> list:
+        """``stage(held, indices, *args[, items])`` on the models at ``indices``: one result per model, in
+        the order of ``indices``.  ``items``, one per model, is split with the indices."""
+
+
+class Method(Protocol):
+    """A recognition method (see the module text)."""
+
+    name: ClassVar[str]
+    Config: ClassVar[type]
+
+    def configure(self, **options) -> Config: ...
+
+    def prepare(self, model) -> None: ...
+
+    def search(self, touch, models: Sequence, config: Config, runner: Runner) -> SearchOutcome: ...

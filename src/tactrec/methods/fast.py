@@ -1,0 +1,402 @@
+"""Method ``fast``: one search over every model, coarse to fine, with a budget.
+
+The hypotheses are (model, place, rotation about the normal, tilt of the
+normal, sign of the normal).  The search takes them in *tiers*
+(:data:`TIERS`), each a step coarse to fine: the few places whose curvature
+best matches the data's, posed by their principal frames; more places; every
+30 degrees at more places (for flat and sharp patches, where curvature and
+principal directions say little); the normal tilted (for a contact on a
+crease, where the estimated normal is off).  A tier runs on every model:
+
+1. *cheap stage* (per model, :func:`_cheap`): the tier's new hypotheses are
+   posed from frames (:func:`tactrec.registration.mesh_fast.frame_poses`) and
+   take ``cheap_steps`` Gauss-Newton steps on exact distances from
+   ``coarse_points`` points a curve (after the first, only the best eighth,
+   at least ``screen``, go on); each place keeps its best rotation and the
+   model its best ``refine`` poses;
+2. *selection* (across models): a pose is refined when its cheap score lies
+   within ``ratio`` x the best error so far (or the tier's best cheap score);
+   the others are deferred, not dropped: a later tier may take them;
+3. *refinement* (per model, :func:`_refined`): ``iterations`` exact steps on
+   three times the points, then two on all points for the model's best.
+
+After each tier the search stops if the best error is a *fit*: within what
+the data's own noise allows (the mean distance of a perfect fit,
+``sigma sqrt(2 / pi)``, ``sigma`` from the curves' third differences) or
+``floor`` x the touch's radius on noise-free data.  Otherwise the next tier
+runs, while the work spent (closest-point queries) is below ``budget``; a
+search that ends on its budget is reported as not settled.  The best
+``polish`` models then take ``polish_iterations`` more steps on all points.
+
+Every cut in a ranked list (screen, rotations, refinement) orders near-equal
+scores by index (:func:`tactrec.linalg.stable_order`), and the arithmetic of
+the steps is element-wise, so the same touch gives the same answer on every
+CPU.  On closed-form surfaces the registration is
+:mod:`tactrec.registration.closedform_fast` (nearest table rows, six-DoF
+Gauss-Newton), in the first tier.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from ..linalg import stable_order
+from ..registration import closedform_fast, mesh_fast
+from ..registration.result import Registration
+from .base import Config, SearchOutcome
+from .common import best_of_orientations, in_model_units
+
+__all__ = ["FastMethod", "FastConfig", "Tier", "TIERS"]
+
+
+@dataclasses.dataclass(frozen=True)
+class Tier:
+    """One step of the schedule: the best ``places`` places per model and normal (None: every
+    vertex), posed by their principal ``"frames"`` or at ``"all"`` 30-degree rotations, with the
+    normal as estimated or also ``tilt`` degrees off four ways."""
+
+    places: int | None
+    rotations: str = "frames"
+    tilt: float = 0.0
+
+    def __post_init__(self):
+        if self.places is not None and (not isinstance(self.places, int) or self.places < 1):
+            raise ValueError(f"a tier's places must be a whole number >= 1 or None, got {self.places!r}")
+        if self.rotations not in ("frames", "all"):
+            raise ValueError(f"a tier's rotations are 'frames' or 'all', got {self.rotations!r}")
+        if not 0.0 <= self.tilt < 90.0:
+            raise ValueError(f"a tier's tilt is in [0, 90) degrees, got {self.tilt!r}")
+
+
+#: the default schedule, coarse to fine
+TIERS = (Tier(24), Tier(150), Tier(600, "all"), Tier(150, "all", 15.0))
+#: the exhaustive reference: every vertex, every 30 degrees
+EXHAUSTIVE = (Tier(None, "all"),)
+
+
+@dataclasses.dataclass(frozen=True)
+class FastConfig(Config):
+    """Options of the ``fast`` method (see the module text)."""
+
+    tiers: tuple = TIERS
+    budget: int = 4_000_000
+    spread: float = 4.0
+    coarse_points: int = 5
+    cheap_steps: int = 2
+    screen: int = 96
+    refine: int = 8
+    ratio: float = 3.0
+    iterations: int = 20
+    polish: int = 3
+    polish_iterations: int = 10
+    umbilic: float = 0.05
+    floor: float = 1e-3
+    plausible: float = 1e-2
+    tolerance: float = 1e-5
+    candidates: int = closedform_fast.DEFAULTS["candidates"]
+
+    def __post_init__(self):
+        tiers = tuple(self.tiers)
+        object.__setattr__(self, "tiers", tiers)
+        self._check("tiers", len(tiers) > 0 and all(isinstance(t, Tier) for t in tiers), "a non-empty tuple of Tier")
+        for name in ("budget", "coarse_points", "cheap_steps", "screen", "refine", "iterations", "polish",
+                     "polish_iterations", "candidates"):
+            value = getattr(self, name)
+            self._check(name, isinstance(value, (int, np.integer)) and value >= (0 if name == "polish" else 1),
+                        "a whole number >= 1")
+        self._check("coarse_points", self.coarse_points >= 3, "at least 3")
+        for name in ("spread", "ratio", "umbilic", "floor", "plausible", "tolerance"):
+            self._check(name, np.isfinite(getattr(self, name)) and getattr(self, name) > 0, "a positive number")
+        self._check("ratio", self.ratio >= 1.0, "at least 1")
+
+
+# ---------------------------------------------------------------------- stages (in worker processes)
+def _places(held, index: int, touch, sign: int, config: FastConfig, every: bool):
+    """The model's places in order for this touch and normal, computed once per touch."""
+    key = (touch.key, index, sign, every)
+    if key not in held.cache:
+        if len(held.cache) > 4 * len(held.entries) + 8:           # another touch: forget the last one's
+            held.cache.clear()
+        model = held.entries[index].model
+        g = touch.oriented(sign)
+        chosen, _, fit = mesh_fast.places(model, g, touch.points, touch.radius, spread=config.spread)
+        if every:
+            field = model.fine_curvatures
+            chosen = stable_order(np.hypot(field.k1 - fit[0][0], field.k2 - fit[0][1]))
+        held.cache[key] = (chosen, fit)
+    return held.cache[key]
+
+
+def _span(tiers, k: int) -> tuple[int, int | None]:
+    """Which of the ranked places tier ``k`` adds: those past the deepest earlier tier of the same kind."""
+    tier = tiers[k]
+    start = max((t.places or 0 for t in tiers[:k] if (t.rotations, t.tilt) == (tier.rotations, tier.tilt)),
+                default=0)
+    return start, tier.places
+
+
+def _cheap(held, indices, touch, config: FastConfig, k: int) -> list[dict]:
+    """Step 1 of tier ``k`` on each mesh model: its best ``refine`` poses and their cheap scores."""
+    tier = config.tiers[k]
+    out = []
+    for index in indices:
+        model = held.entries[index].model
+        t = in_model_units(touch, model)
+        if t.radius > model.size:
+            out.append({"rejected": "the touch is larger than the model", "queries": 0})
+            continue
+        x = t.subset(config.coarse_points)
+        poses, queries, tried = [], 0, 0
+        for sign, g in zip((1, -1), t.orientations):
+            chosen, fit = _places(held, index, t, sign, config, tier.places is None)
+            start, stop = _span(config.tiers, k)
+            for lo in range(start, len(chosen) if stop is None else min(stop, len(chosen)), 1000):
+                part = chosen[lo:min(lo + 1000, len(chosen) if stop is None else stop)]
+                tried += len(part)
+                R, tr, owner = mesh_fast.frame_poses(model, g, part, fit, rotations=tier.rotations,
+                                                     umbilic=config.umbilic / t.radius, tilt=tier.tilt)
+                steps = config.cheap_steps
+                kept = max(config.screen, len(R) // 8)
+                if tier.places is not None and len(R) > kept and steps > 1:
+                    R, tr, first, q = mesh_fast.refine(model, R, tr, x, iterations=1, predict=True)
+                    keep = stable_order(first)[:kept]
+                    R, tr, owner, steps, queries = R[keep], tr[keep], owner[keep], steps - 1, queries + q
+                R, tr, score, q = mesh_fast.refine(model, R, tr, x, iterations=steps, predict=True,
+                                                   tolerance=config.tolerance)
+                queries += q
+                order = np.lexsort((stable_order(score).argsort(), owner))          # each place's best rotation
+                best = order[np.r_[True, owner[order][1:] != owner[order][:-1]]]
+                poses.append((R[best], tr[best], score[best], np.full(len(best), sign)))
+        if not poses:
+            out.append({"rejected": "no place to start from", "queries": queries, "places": tried})
+            continue
+        R, tr, score, signs = (np.concatenate([p[i] for p in poses]) for i in range(4))
+        keep = stable_order(score)[:config.refine]
+        out.append({"R": R[keep], "t": tr[keep], "score": score[keep] / t.scale, "sign": signs[keep],
+                    "queries": queries, "places": tried})
+    return out
+
+
+def _registration(model, touch, R: np.ndarray, t: np.ndarray, error: float, sign: int) -> Registration:
+    """The registration of pose ``R (3, 3), t (3,)`` on a mesh, with the normal of sign ``sign``."""
+    return mesh_fast.registration(model, touch.oriented(sign), R, t, error, candidates=0, sign=sign, scale=touch.scale)
+
+
+def _refined(held, indices, touch, config: FastConfig, chosen: list[dict]) -> list[dict]:
+    """Step 3 on each model: the chosen poses refined on exact distances; the best as a registration."""
+    out = []
+    for index, poses in zip(indices, chosen):
+        model = held.entries[index].model
+        t = in_model_units(touch, model)
+        R, tr, error, q1 = mesh_fast.refine(model, poses["R"], poses["t"], t.subset(3 * config.coarse_points),
+                                           iterations=config.iterations, tolerance=config.tolerance)
+        b = stable_order(error)[0]
+        R, tr, error, q2 = mesh_fast.refine(model, R[b:b + 1], tr[b:b + 1], t.points, iterations=2,
+                                           tolerance=config.tolerance)
+        out.append({"registration": _registration(model, t, R[0], tr[0], error[0], int(poses["sign"][b])),
+                    "queries": q1 + q2})
+    return out
+
+
+def _polished(held, indices, touch, config: FastConfig, registrations: list[Registration]) -> list[dict]:
+    """The registrations refined further on all points (kept where that lowers the error)."""
+    out = []
+    for index, r in zip(indices, registrations):
+        model = held.entries[index].model
+        t = in_model_units(touch, model)
+        if model.kind == "mesh":
+            R, tr, error, q = mesh_fast.refine(model, r.rotation[None], r.translation[None], t.points,
+                                               iterations=config.polish_iterations, tolerance=config.tolerance)
+            better = _registration(model, t, R[0], tr[0], error[0], r.normal_sign) if error[0] < r.error else r
+        else:
+            better = dataclasses.replace(closedform_fast.polish(model, r, t.oriented(r.normal_sign), t.points),
+                                         normal_sign=r.normal_sign, scale=r.scale)
+            q = config.polish_iterations * len(t.points)
+        out.append({"registration": better, "queries": q})
+    return out
+
+
+def _closed_form(held, indices, touch, config: FastConfig) -> list[dict]:
+    """Closed-form surfaces: the nearest table rows, refined in six degrees of freedom."""
+    out = []
+    for index in indices:
+        entry = held.entries[index]
+        t = in_model_units(touch, entry.model)
+        r = best_of_orientations(lambda g: closedform_fast.register(entry.model, entry.table, g, t.points,
+                                                                    candidates=config.candidates), t,
+                                 entry.model.name)
+        out.append({"registration": r, "queries": config.candidates * 12 * len(t.points)})
+    return out
+
+
+# ---------------------------------------------------------------------- the search
+def _error(r: Registration | None) -> float:
+    """A registration's error in the data's units (inf for none)."""
+    return r.error / r.scale if r is not None and r.ok else np.inf
+
+
+def fit_limit(touch, floor: float) -> float:
+    """The largest mean distance (data units) still a fit: a perfect fit's under the data's noise,
+    ``sigma sqrt(2 / pi)``, or ``floor`` x the touch's radius, whichever is larger."""
+    return max(touch.noise * np.sqrt(2.0 / np.pi), floor * touch.radius)
+
+
+def _tier_cost(config: FastConfig, k: int, signs: int, places: int) -> int:
+    """About how many closest-point queries tier ``k`` costs on one model with ``places`` places."""
+    tier = config.tiers[k]
+    start, stop = _span(config.tiers, k)
+    count = max(0, min(places, stop if stop is not None else places) - start)
+    poses = count * signs * (2 if tier.rotations == "frames" else 12) * (5 if tier.tilt > 0 else 1)
+    screened = min(poses, max(config.screen, poses // 8)) if tier.places is not None else poses
+    cheap = 3 * config.coarse_points * (poses + (config.cheap_steps - 1) * screened)
+    return int(cheap + config.refine * config.iterations * 9 * config.coarse_points)
+
+
+class _State:
+    """What the search knows: each model's best registration, best cheap score and next tier."""
+
+    def __init__(self, touch, models, meshes, config: FastConfig):
+        self.touch, self.config = touch, config
+        self.best: dict[int, Registration] = {}
+        self.rejected: dict[int, str] = {}
+        self.cheapest = {i: np.inf for i in meshes}
+        self.tried = {i: 0 for i in meshes}
+        self.next = {i: 0 for i in meshes}
+        self.sizes = {i: len(models[i].model.vertices) for i in meshes}
+        self.limit = fit_limit(touch, config.floor)
+
+    def error(self, i: int) -> float:
+        return _error(self.best.get(i))
+
+    def standing(self, i: int) -> float:
+        """The best score known on model ``i``, refined or cheap (data units)."""
+        return min(self.error(i), self.cheapest.get(i, np.inf))
+
+    def leader(self) -> tuple[int | None, float]:
+        ranked = sorted(self.best, key=lambda i: (self.error(i), i))
+        return (ranked[0], self.error(ranked[0])) if ranked else (None, np.inf)
+
+    def waiting(self) -> list[int]:
+        return [i for i in self.next if i not in self.rejected and self.next[i] < len(self.config.tiers)]
+
+    def clear(self) -> bool:
+        """Whether the best is plausible (below ``plausible`` x the touch's radius) and every other
+        model's standing lies beyond ``ratio`` x its error."""
+        leader, e1 = self.leader()
+        if leader is None or not np.isfinite(e1) or e1 > self.config.plausible * self.touch.radius:
+            return False
+        return all(self.standing(i) > self.config.ratio * e1 for i in set(self.cheapest) | set(self.best)
+                   if i != leader)
+
+    def contending(self) -> list[int]:
+        """The models whose next tier runs in this round: the leader alone while it is clear of the
+        others (its pose still to fit); otherwise those whose standing lies within ``ratio`` x the
+        best error (every model while nothing fits plausibly); when none does, the deferred ones
+        whose next tier is the shallowest."""
+        waiting = self.waiting()
+        leader, e1 = self.leader()
+        if self.clear():
+            return [leader] if leader in waiting else []
+        if not np.isfinite(e1) or e1 > self.config.plausible * self.touch.radius:
+            near = waiting
+        else:
+            near = [i for i in waiting if self.standing(i) <= self.config.ratio * max(e1, self.limit)]
+        if near:
+            return near
+        shallowest = min((self.next[i] for i in waiting), default=None)
+        return [i for i in waiting if self.next[i] == shallowest]
+
+    def settled(self) -> bool:
+        """Whether the search may stop: the best error is a fit (within the data's noise, or ``floor``
+        x the touch's radius), or the best is clear of the others and its own tiers have all run."""
+        leader, e1 = self.leader()
+        if leader is None or not np.isfinite(e1):
+            return False
+        return bool(e1 <= self.limit or (self.clear() and leader not in self.waiting()))
+
+
+class FastMethod:
+    """The ``fast`` method (see the module text)."""
+
+    name = "fast"
+    Config = FastConfig
+
+    def configure(self, **options) -> FastConfig:
+        if options.get("exhaustive"):
+            options = dict(options, tiers=EXHAUSTIVE)
+        options.pop("exhaustive", None)
+        return FastConfig.from_options(self.name, options)
+
+    def prepare(self, model) -> None:
+        if model.kind == "mesh":
+            mesh_fast.prepare(model)
+
+    def search(self, touch, models, config: FastConfig, runner) -> SearchOutcome:
+        meshes = [i for i, e in enumerate(models) if e.model.kind == "mesh"]
+        others = [i for i, e in enumerate(models) if e.model.kind != "mesh"]
+        state = _State(touch, models, meshes, config)
+        work, settled, depth = 0, False, 0
+        for i, found in zip(others, runner.map(_closed_form, others, touch, config)):
+            state.best[i], work = found["registration"], work + found["queries"]
+        signs = len(touch.orientations)
+        while True:
+            if state.settled():
+                settled = True
+                break
+            group = state.contending()
+            if not group:
+                settled = True                              # every tier has run on every model
+                break
+            k = state.next[group[0]]
+            group = [i for i in group if state.next[i] == k]
+            cost = sum(_tier_cost(config, k, signs, state.sizes[i]) for i in group)
+            if work > 0 and work + cost > config.budget:
+                break
+            depth = max(depth, k + 1)
+            work += self._tier(state, group, k, runner)
+        top = [i for i in sorted(state.best, key=lambda i: (state.error(i), i)) if state.best[i].ok][:config.polish]
+        for i, found in zip(top, runner.map(_polished, top, touch, config, items=[state.best[i] for i in top])):
+            state.best[i], work = found["registration"], work + found["queries"]
+        return SearchOutcome(self._ranking(state, models), settled, int(work), depth)
+
+    @staticmethod
+    def _tier(state: _State, group: list[int], k: int, runner) -> int:
+        """Tier ``k`` on the models of ``group``: cheap stage, selection, refinement.  Returns the work."""
+        touch, config = state.touch, state.config
+        cheap = dict(zip(group, runner.map(_cheap, group, touch, config, k)))
+        work = sum(c["queries"] for c in cheap.values())
+        for i, c in cheap.items():
+            state.next[i] = k + 1
+            state.tried[i] += c.get("places", 0)
+            if "rejected" in c:
+                state.rejected[i] = c["rejected"]
+            else:
+                state.cheapest[i] = min(state.cheapest[i], float(c["score"][0]))
+        _, e1 = state.leader()
+        c_best = min((float(c["score"][0]) for c in cheap.values() if "score" in c), default=np.inf)
+        bound = config.ratio * max(min(e1, c_best), state.limit)
+        chosen = {i: {key: c[key][c["score"] <= bound] for key in ("R", "t", "score", "sign")}
+                  for i, c in cheap.items() if "score" in c and c["score"][0] <= bound}
+        order = sorted(chosen)
+        for i, found in zip(order, runner.map(_refined, order, touch, config, items=[chosen[i] for i in order])):
+            work += found["queries"]
+            if _error(found["registration"]) < state.error(i):
+                state.best[i] = found["registration"]
+        return work
+
+    @staticmethod
+    def _ranking(state: _State, models) -> list[Registration]:
+        ranking = []
+        for i, entry in enumerate(models):
+            if i in state.best:
+                r = state.best[i]
+                ranking.append(dataclasses.replace(r, candidates=state.tried[i]) if i in state.tried else r)
+            elif i in state.rejected:
+                ranking.append(Registration.rejection(entry.name, state.rejected[i]))
+            else:
+                ranking.append(Registration.rejection(
+                    entry.name, f"deferred: its best cheap score {state.cheapest[i]:.3g} stayed beyond "
+                    f"{state.config.ratio:g} x the best error", cheap=state.cheapest[i]))
+        return ranking

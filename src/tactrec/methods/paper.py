@@ -1,0 +1,83 @@
+"""Method ``paper``: the paper's own algorithm, model by model (Sections 3.2, 4.2, 5.3).
+
+Each model is registered on its own: the lookup within ``delta`` (eq. 7; a
+model without a candidate is rejected, "NC"), then steepest descent on
+``E(u, v, phi)`` on a closed-form surface (:mod:`tactrec.registration.closedform_paper`)
+or the greedy walk over eq. 15's plane sections on a mesh
+(:mod:`tactrec.registration.mesh_paper`).  Without an ``outward`` hint both
+normals are tried and the better registration kept.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+from ..registration import closedform_paper, mesh_paper
+from ..registration.result import Registration
+from .base import Config, SearchOutcome
+from .common import best_of_orientations, in_model_units
+
+__all__ = ["PaperMethod", "PaperConfig"]
+
+
+@dataclasses.dataclass(frozen=True)
+class PaperConfig(Config):
+    """Options of the ``paper`` method.
+
+    delta : float or None
+        Lookup tolerance on ``(k1, k2)``, 1/model units (eq. 7); None: 0.2 on closed-form
+        surfaces, the paper's 0.03 /mm in a mesh's units.
+    phi_samples, bisections, max_iterations
+        The initial-phi scan, its bisections and the steepest-descent steps (Section 4.2).
+    phi_step, max_steps
+        The rotation step in degrees and the greedy walk's longest run on a mesh (Section 5.3).
+    """
+
+    delta: float | None = None
+    phi_samples: int = closedform_paper.DEFAULTS["phi_samples"]
+    bisections: int = closedform_paper.DEFAULTS["bisections"]
+    max_iterations: int = closedform_paper.DEFAULTS["max_iterations"]
+    phi_step: float = mesh_paper.DEFAULTS["phi_step"]
+    max_steps: int = mesh_paper.DEFAULTS["max_steps"]
+
+    def __post_init__(self):
+        self._check("delta", self.delta is None or self.delta > 0, "positive")
+        for name in ("phi_samples", "bisections", "max_iterations", "max_steps"):
+            self._check(name, isinstance(getattr(self, name), int) and getattr(self, name) >= 1, "a whole number >= 1")
+        self._check("phi_step", 0 < self.phi_step <= 180, "in (0, 180] degrees")
+
+
+def _register(entry, touch, config: PaperConfig) -> Registration:
+    model = entry.model
+    touch = in_model_units(touch, model)
+    if model.kind == "mesh":
+        def one(g):
+            return mesh_paper.register(model, entry.table, g, touch.points, curves=touch.curves, delta=config.delta,
+                                       phi_step=config.phi_step, max_steps=config.max_steps)
+    else:
+        def one(g):
+            return closedform_paper.register(model, entry.table, g, touch.points,
+                                             delta=closedform_paper.DEFAULTS["delta"] if config.delta is None
+                                             else config.delta, phi_samples=config.phi_samples,
+                                             bisections=config.bisections, max_iterations=config.max_iterations)
+    return best_of_orientations(one, touch, model.name)
+
+
+def _stage(held, indices, touch, config) -> list[Registration]:
+    return [_register(held.entries[i], touch, config) for i in indices]
+
+
+class PaperMethod:
+    """The paper's method (see the module text)."""
+
+    name = "paper"
+    Config = PaperConfig
+
+    def configure(self, **options) -> PaperConfig:
+        return PaperConfig.from_options(self.name, options)
+
+    def prepare(self, model) -> None:
+        """Nothing beyond the lookup table, which the database holds."""
+
+    def search(self, touch, models, config: PaperConfig, runner) -> SearchOutcome:
+        return SearchOutcome(runner.map(_stage, range(len(models)), touch, config))
