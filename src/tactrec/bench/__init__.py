@@ -9,7 +9,8 @@ from __future__ import annotations
 
 from typing import Callable
 
-from . import baselines, fast_vs_paper, fit_limit, paper_closedform, paper_example, paper_fig11, paper_mesh, scale
+from . import (baselines, fast_vs_paper, fit_limit, kernels, paper_closedform, paper_example, paper_fig11, paper_mesh,
+               scale)
 
 __all__ = ["BENCHMARKS"]
 
@@ -24,4 +25,5 @@ BENCHMARKS: dict[str, Callable[..., dict]] = {
     "scale-exhaustive": scale.run_exhaustive,
     "baselines": baselines.run,
     "fit-limit": fit_limit.run,
+    "kernels": kernels.run,
 }
