@@ -24,8 +24,8 @@ After each tier the search stops if the best error is a *fit*: within what
 the data's own noise allows (the mean distance of a perfect fit,
 ``sigma sqrt(2 / pi)``, ``sigma`` from the curves' third differences) or
 ``floor`` x the touch's radius on noise-free data.  Otherwise the next tier
-runs, while the work spent (closest-point queries) is below ``budget``; a
-search that ends on its budget is reported as not settled.  The best
+runs, while the work (closest-point queries) stays within ``budget`` per
+model; a search that ends on its budget is reported as not settled.  The best
 ``polish`` models then take ``polish_iterations`` more steps on all points.
 
 Every cut in a ranked list (screen, rotations, refinement) orders near-equal
@@ -81,7 +81,7 @@ class FastConfig(Config):
     """Options of the ``fast`` method (see the module text)."""
 
     tiers: tuple = TIERS
-    budget: int = 4_000_000
+    budget: int = 200_000
     spread: float = 4.0
     coarse_points: int = 5
     cheap_steps: int = 2
@@ -352,7 +352,7 @@ class FastMethod:
             k = state.next[group[0]]
             group = [i for i in group if state.next[i] == k]
             cost = sum(_tier_cost(config, k, signs, state.sizes[i]) for i in group)
-            if work > 0 and work + cost > config.budget:
+            if work > 0 and work + cost > config.budget * len(models):
                 break
             depth = max(depth, k + 1)
             work += self._tier(state, group, k, runner)

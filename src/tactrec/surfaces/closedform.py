@@ -38,7 +38,6 @@ from functools import cached_property
 from pathlib import Path
 
 import numpy as np
-import sympy as sp
 
 from ..errors import InputError
 from .base import SiteFrame, SurfaceModel, TableSamples
@@ -98,6 +97,8 @@ class FrameJet:
 
 def _compile(exprs, args):
     """Compile sympy expressions into one numpy function returning ``(..., len(exprs))``."""
+    import sympy as sp
+
     fn = sp.lambdify(args, list(exprs), modules="numpy", cse=True)
 
     def call(*arrays):
@@ -202,6 +203,8 @@ class ClosedFormSurface(SurfaceModel):
         return cls(spec, text=text, source=source, name=name)
 
     def _parse(self, spec: dict, default_name: str | None) -> None:
+        import sympy as sp
+
         known = {"name", "units", "description", "parameters", "parametric", "implicit", "table", "symmetries"}
         unknown = set(spec) - known
         if unknown:

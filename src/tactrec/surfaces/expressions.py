@@ -9,19 +9,29 @@ functions are accepted.
 from __future__ import annotations
 
 import ast
+import functools
 from typing import Mapping
 
-import sympy as sp
+__all__ = ["parse_expression", "functions", "constants"]
 
-__all__ = ["parse_expression", "FUNCTIONS", "CONSTANTS"]
 
-FUNCTIONS = {
-    "sin": sp.sin, "cos": sp.cos, "tan": sp.tan,
-    "asin": sp.asin, "acos": sp.acos, "atan": sp.atan, "atan2": sp.atan2,
-    "sinh": sp.sinh, "cosh": sp.cosh, "tanh": sp.tanh,
-    "exp": sp.exp, "log": sp.log, "sqrt": sp.sqrt, "abs": sp.Abs,
-}
-CONSTANTS = {"pi": sp.pi, "e": sp.E}
+@functools.cache
+def functions() -> dict:
+    """The functions an expression may call, by name (sympy, imported when first needed)."""
+    import sympy as sp
+
+    return {"sin": sp.sin, "cos": sp.cos, "tan": sp.tan,
+            "asin": sp.asin, "acos": sp.acos, "atan": sp.atan, "atan2": sp.atan2,
+            "sinh": sp.sinh, "cosh": sp.cosh, "tanh": sp.tanh,
+            "exp": sp.exp, "log": sp.log, "sqrt": sp.sqrt, "abs": sp.Abs}
+
+
+@functools.cache
+def constants() -> dict:
+    """The named constants of an expression."""
+    import sympy as sp
+
+    return {"pi": sp.pi, "e": sp.E}
 
 _BINARY = {
     ast.Add: lambda a, b: a + b,
@@ -47,6 +57,8 @@ def parse_expression(text: str, symbols: Mapping[str, sp.Expr]) -> sp.Expr:
     ValueError
         With a one-line message saying what is not allowed.
     """
+    import sympy as sp
+
     if isinstance(text, bool):
         raise ValueError(f"expected an expression, got {text!r}")
     if isinstance(text, (int, float)):
@@ -61,6 +73,8 @@ def parse_expression(text: str, symbols: Mapping[str, sp.Expr]) -> sp.Expr:
 
 
 def _translate(node: ast.AST, symbols: Mapping[str, sp.Expr], text: str) -> sp.Expr:
+    import sympy as sp
+
     if isinstance(node, ast.Constant):
         if isinstance(node.value, bool) or not isinstance(node.value, (int, float)):
             raise ValueError(f"unexpected constant {node.value!r} in {text!r}")
@@ -68,8 +82,8 @@ def _translate(node: ast.AST, symbols: Mapping[str, sp.Expr], text: str) -> sp.E
     if isinstance(node, ast.Name):
         if node.id in symbols:
             return symbols[node.id]
-        if node.id in CONSTANTS:
-            return CONSTANTS[node.id]
+        if node.id in constants():
+            return constants()[node.id]
         raise ValueError(f"unknown name {node.id!r} in {text!r}")
     if isinstance(node, ast.BinOp) and isinstance(node.op, ast.BitXor):
         raise ValueError(f"'^' is not a power here; write x**2 in {text!r}")
@@ -83,10 +97,10 @@ def _translate(node: ast.AST, symbols: Mapping[str, sp.Expr], text: str) -> sp.E
     if isinstance(node, ast.Call):
         if not isinstance(node.func, ast.Name):
             raise ValueError(f"calling {ast.unparse(node.func)!r} is not allowed in {text!r}")
-        if node.func.id not in FUNCTIONS:
+        if node.func.id not in functions():
             raise ValueError(f"unknown function {node.func.id!r} in {text!r}")
         if node.keywords:
             raise ValueError(f"keyword arguments are not allowed in {text!r}")
         args = [_translate(arg, symbols, text) for arg in node.args]
-        return FUNCTIONS[node.func.id](*args)
+        return functions()[node.func.id](*args)
     raise ValueError(f"{type(node).__name__} syntax is not allowed in {text!r}")
