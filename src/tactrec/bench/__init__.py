@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import Callable
 
-from . import (baselines, fast_vs_paper, fit_limit, kernels, paper_closedform, paper_example, paper_fig11, paper_mesh,
+from . import (baselines, cold_start, fast_vs_paper, fit_limit, kernels, paper_closedform, paper_example, paper_fig11, paper_mesh,
                scale)
 
 __all__ = ["BENCHMARKS"]
@@ -26,4 +26,5 @@ BENCHMARKS: dict[str, Callable[..., dict]] = {
     "baselines": baselines.run,
     "fit-limit": fit_limit.run,
     "kernels": kernels.run,
+    "cold-start": cold_start.run,
 }

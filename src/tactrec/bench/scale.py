@@ -60,7 +60,7 @@ def _touch(entry, m_index: int, instance: int, seed: int):
 def _outcome(rec, name: str) -> dict:
     ok = [r.model for r in rec.ranking if r.ok]
     return {"recognized": rec.best, "rank": ok.index(name) + 1 if name in ok else None,
-            "seconds": rec.seconds, "ambiguous": rec.ambiguous,
+            "seconds": rec.seconds, "ambiguous": rec.ambiguous, "settled": rec.settled, "depth": rec.depth,
             "errors": [[r.model, r.error] for r in rec.ranking[:3] if r.ok]}
 
 
@@ -111,7 +111,10 @@ def _accuracy(rows: list[dict]) -> dict:
             "top3_percent": 100.0 * np.mean([k is not None and k <= 3 for k in ranks]),
             "ambiguous": len(rows) - len(clear),
             "top1_percent_unambiguous": 100.0 * np.mean([r["rank"] == 1 for r in clear]) if clear else None,
-            "median_seconds": float(np.median([r["seconds"] for r in rows]))}
+            "median_seconds": float(np.median([r["seconds"] for r in rows])),
+            "p95_seconds": float(np.percentile([r["seconds"] for r in rows], 95)),
+            "max_seconds": float(np.max([r["seconds"] for r in rows])),
+            "unsettled": sum(not r.get("settled", True) for r in rows)}
 
 
 def run_scale(*, out, instances: int = 2, seed: int = 0, jobs: int | None = None, quiet: bool = False,
@@ -133,7 +136,8 @@ def run_scale(*, out, instances: int = 2, seed: int = 0, jobs: int | None = None
     a = table["all"]
     lines = [f"{count} YCB scans, {instances} P3 touches each (seed {seed}), method fast:",
              f"  top-1 {a['top1_percent']:.1f}%, top-3 {a['top3_percent']:.1f}%, {a['ambiguous']} flagged ambiguous "
-             f"(top-1 among the rest {a['top1_percent_unambiguous']:.1f}%), median {a['median_seconds']:.2f} s",
+             f"(top-1 among the rest {a['top1_percent_unambiguous']:.1f}%), median {a['median_seconds']:.2f} s, "
+             f"p95 {a['p95_seconds']:.2f} s, max {a['max_seconds']:.2f} s, {a['unsettled']} unsettled",
              "  models: " + ", ".join(f"{k}: {v['median_seconds']:.2f} s (top-1 {v['top1_percent']:.0f}%)"
                                       for k, v in table["sizes"].items() if v)]
     table["text"] = "\n".join(lines)
