@@ -397,3 +397,36 @@ def test_fit_limit_paired_gap_tells_a_tie_from_a_better_fit():
     farther = truth + 0.01 + rng.normal(0.0, 0.005, 300)
     assert paired_gap(farther, truth) > 10.0 and paired_gap(truth, farther) < -10.0
     assert paired_gap(truth, truth) == 0.0 and paired_gap(np.full(5, 0.5), np.full(5, 0.25)) == np.inf
+
+
+def test_a_contact_the_data_leave_free_is_flagged():
+    """Five seeded touches half-way along a long cylinder, where the pose slides along the axis:
+    all flagged ambiguous, their contact spread above ten times the fit's error; the median of
+    that ratio is more than twice its median on five touches of a strongly curved ellipsoid."""
+    import trimesh
+
+    from tactrec.recognition import LOCATED
+
+    tube = trimesh.creation.cylinder(radius=12.0, height=120.0, sections=96)
+    tube = trimesh.Trimesh(*trimesh.remesh.subdivide_to_size(tube.vertices, tube.faces, max_edge=2.0))
+    egg = trimesh.creation.icosphere(subdivisions=4, radius=1.0).apply_scale([24.0, 12.0, 6.0])
+    ratios = {}
+    for mesh, name in ((tube, "tube"), (egg, "egg")):
+        model = MeshModel(mesh.vertices, mesh.faces, name=name, units="mm")
+        entry = ModelEntry(model, CurvatureTable(model.table_samples()))
+        ratios[name] = []
+        for i in range(5):
+            rng = instance_rng(31, i)
+            options = dict(points=41, spacing=0.3, angle=60.0, noise=0.01, noise_kind="gaussian", rng=rng)
+            if name == "tube":
+                around = rotations_from_vectors(np.array([[0.0, 0.0, rng.uniform(0, 2 * np.pi)]]))[0]
+                touch = simulate_touch(model, model.locate(around @ np.array([12.0, 0.0, 0.0])), **options)
+            else:
+                touch = simulate_random_touch(model, **options)
+            r = recognize(touch, [entry])
+            reg = r.registration
+            ratios[name].append(reg.spread / reg.error)
+            assert r.best == name
+            if name == "tube":
+                assert r.ambiguous and reg.spread > LOCATED * reg.error
+    assert np.median(ratios["tube"]) > 2 * np.median(ratios["egg"])

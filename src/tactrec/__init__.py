@@ -22,7 +22,7 @@ from .database import Database, build_database, build_entries, load_database
 from .errors import InputError
 from .estimation import LocalGeometry, estimate
 from .io.touch import TactileData, load_touch, save_touch
-from .recognition import Recognition, recognize
+from .recognition import Recognition, Recognizer, recognize
 from .registration import Registration
 from .simulation import simulate_random_touch, simulate_touch
 from .surfaces import ClosedFormSurface, load_model
@@ -30,5 +30,5 @@ from .surfaces import ClosedFormSurface, load_model
 __all__ = [
     "__version__", "InputError", "TactileData", "load_touch", "save_touch", "LocalGeometry", "estimate",
     "ClosedFormSurface", "load_model", "Database", "build_database", "build_entries", "load_database",
-    "Recognition", "recognize", "Registration", "simulate_touch", "simulate_random_touch",
+    "Recognition", "Recognizer", "recognize", "Registration", "simulate_touch", "simulate_random_touch",
 ]

@@ -83,12 +83,17 @@ class Recognition:
 
     @property
     def ambiguous(self) -> bool:
-        """True when the runner-up's error is within :attr:`margin` of the best's: the touch
-        fits both models about equally well, and the ranking between them is not to be trusted."""
+        """True when the data do not decide the answer: the runner-up's error is within
+        :attr:`margin` of the best's (the touch fits both models about equally well), or the
+        search ended on its budget (:attr:`settled` false), or the data leave the contact free
+        on the best model (its ``spread`` exceeds :data:`LOCATED` x its error: a direction the
+        data do not constrain, along a cylinder or over a flat patch)."""
         ok = [r for r in self.ranking if r.ok]
-        if len(ok) < 2:
+        if not ok:
             return False
-        return bool(ok[1].error / ok[1].scale - ok[0].error / ok[0].scale <= self.margin)
+        if not self.settled or ok[0].spread > LOCATED * ok[0].error:
+            return True
+        return len(ok) > 1 and bool(ok[1].error / ok[1].scale - ok[0].error / ok[0].scale <= self.margin)
 
     @property
     def registration(self) -> Registration | None:
@@ -108,6 +113,12 @@ class Recognition:
             "settled": self.settled,
             "seconds": round(self.seconds, 4),
         }
+
+
+#: the data leave the contact free when its spread (the root of the trace of its covariance under the
+#: fit) exceeds this many times the fit's mean residual: the dilution of precision of a direction
+#: the data do not constrain (on YCB scans, the median is 3 for P3 touches and 6 for hard ones)
+LOCATED = 10.0
 
 
 def _rank_key(r: Registration):

@@ -15,7 +15,7 @@ import numpy as np
 from ..io.atomic import write_text_atomic
 
 __all__ = ["paper_values", "instance_rng", "run_parallel", "write_json", "default_jobs", "sources_hash",
-           "saved_record", "recognizer"]
+           "saved_record", "recognizer", "CORE_SOURCES"]
 
 #: the recognizers a benchmark process keeps, by models and options (their worker processes end with it)
 _RECOGNIZERS: dict = {}
@@ -77,6 +77,11 @@ def _default(obj):
     if isinstance(obj, np.ndarray):
         return obj.tolist()
     raise TypeError(type(obj).__name__)
+
+
+#: the sources every recognition depends on (files, or folders of ``.py`` files, relative to the package)
+CORE_SOURCES = ("io", "estimation.py", "features.py", "linalg.py", "simulation.py", "tables.py", "recognition.py",
+                "surfaces", "registration", "methods")
 
 
 def sources_hash(*relative: str) -> str:

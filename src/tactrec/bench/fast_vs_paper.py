@@ -33,7 +33,7 @@ from ..errors import InputError
 from ..registration import mesh_fast
 from ..simulation import simulate_touch, spread_vertices
 from ..surfaces import BUILTIN_SETS
-from .common import instance_rng, recognizer, run_parallel, saved_record, sources_hash, write_json
+from .common import CORE_SOURCES, instance_rng, recognizer, run_parallel, saved_record, sources_hash, write_json
 
 __all__ = ["run", "PROTOCOLS", "METHODS"]
 
@@ -110,8 +110,7 @@ def _touch(task):
 
 def _code_hash() -> str:
     """Hash of the sources a record depends on."""
-    return sources_hash("estimation.py", "simulation.py", "tables.py", "recognition.py", "bench/fast_vs_paper.py",
-                        "surfaces", "registration")
+    return sources_hash(*CORE_SOURCES, "bench/fast_vs_paper.py")
 
 
 def _touch_saved(job):

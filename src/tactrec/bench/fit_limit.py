@@ -41,15 +41,14 @@ from ..registration import mesh_fast
 from ..registration.result import apply_poses
 from ..surfaces import BUILTIN_SETS
 from ..units import conversion
-from .common import recognizer, run_parallel, saved_record, sources_hash, write_json
+from .common import CORE_SOURCES, recognizer, run_parallel, saved_record, sources_hash, write_json
 from .fast_vs_paper import PROTOCOLS, _database, _simulate
 
 __all__ = ["run"]
 
 
 def _code_hash() -> str:
-    return sources_hash("estimation.py", "simulation.py", "tables.py", "recognition.py", "bench/fast_vs_paper.py",
-                        "bench/fit_limit.py", "surfaces", "registration")
+    return sources_hash(*CORE_SOURCES, "bench/fast_vs_paper.py", "bench/fit_limit.py")
 
 
 def paired_gap(winner: np.ndarray, truth: np.ndarray) -> float:

@@ -28,7 +28,7 @@ from ..estimation import estimate
 from ..registration import mesh_paper
 from ..simulation import simulate_touch, spread_vertices
 from ..surfaces import BUILTIN_SETS
-from .common import default_jobs, instance_rng, run_parallel, saved_record, sources_hash, write_json
+from .common import CORE_SOURCES, default_jobs, instance_rng, run_parallel, saved_record, sources_hash, write_json
 
 __all__ = ["run_fig11", "SWEEPS", "DEFAULTS"]
 
@@ -141,9 +141,8 @@ def _task_key(task) -> str:
 
 
 def _code_hash() -> str:
-    """Hash of the sources a P3 record depends on."""
-    return sources_hash("estimation.py", "simulation.py", "tables.py", "surfaces/mesh.py", "registration/mesh_paper.py",
-                        "bench/paper_fig11.py")
+    """Hash of the sources a record depends on."""
+    return sources_hash(*CORE_SOURCES, "bench/paper_fig11.py")
 
 
 def _touch_saved(job):

@@ -6,7 +6,7 @@ normal, sign of the normal).  The search takes them in *tiers*
 best matches the data's, posed by their principal frames; more places; every
 30 degrees at more places (for flat and sharp patches, where curvature and
 principal directions say little); the normal tilted (for a contact on a
-crease, where the estimated normal is off).  A tier runs on every model:
+crease, where the estimated normal is off).  A tier on a set of models is
 
 1. *cheap stage* (per model, :func:`_cheap`): the tier's new hypotheses are
    posed from frames (:func:`tactrec.registration.mesh_fast.frame_poses`) and
@@ -16,17 +16,25 @@ crease, where the estimated normal is off).  A tier runs on every model:
    model its best ``refine`` poses;
 2. *selection* (across models): a pose is refined when its cheap score lies
    within ``ratio`` x the best error so far (or the tier's best cheap score);
-   the others are deferred, not dropped: a later tier may take them;
+   the others are deferred, not dropped;
 3. *refinement* (per model, :func:`_refined`): ``iterations`` exact steps on
    three times the points, then two on all points for the model's best.
 
-After each tier the search stops if the best error is a *fit*: within what
-the data's own noise allows (the mean distance of a perfect fit,
-``sigma sqrt(2 / pi)``, ``sigma`` from the curves' third differences) or
-``floor`` x the touch's radius on noise-free data.  Otherwise the next tier
-runs, while the work (closest-point queries) stays within ``budget`` per
-model; a search that ends on its budget is reported as not settled.  The best
-``polish`` models then take ``polish_iterations`` more steps on all points.
+The first tier runs on every model.  Each later round runs the next tier of
+the models in contention (:meth:`_State.contending`): those whose best score
+lies within ``ratio`` x the best error (all while nothing fits plausibly,
+below ``plausible`` x the touch's radius); the leader alone once it is clear
+of all others by that factor, to fit its pose; the deferred models, shallowest
+tier first, when none contends.  The search stops (:meth:`_State.settled`)
+when the best error is a *fit*: within what the data's own noise allows (the
+mean distance of a perfect fit, ``sigma sqrt(2 / pi)``, ``sigma`` from the
+curves' third differences) or ``floor`` x the touch's radius on noise-free
+data; or when the best is clear and its own tiers have run; or when nothing
+is left.  It also stops before a round whose estimated cost would take the
+work (closest-point queries) past ``budget`` per model; such a search is
+reported as not settled (the budget counts per model and per normal tried:
+twice as much without an ``outward`` hint).  The best ``polish`` models then take
+``polish_iterations`` more steps on all points.
 
 Every cut in a ranked list (screen, rotations, refinement) orders near-equal
 scores by index (:func:`tactrec.linalg.stable_order`), and the arithmetic of
@@ -181,7 +189,8 @@ def _cheap(held, indices, touch, config: FastConfig, k: int) -> list[dict]:
 
 def _registration(model, touch, R: np.ndarray, t: np.ndarray, error: float, sign: int) -> Registration:
     """The registration of pose ``R (3, 3), t (3,)`` on a mesh, with the normal of sign ``sign``."""
-    return mesh_fast.registration(model, touch.oriented(sign), R, t, error, candidates=0, sign=sign, scale=touch.scale)
+    return mesh_fast.registration(model, touch.oriented(sign), R, t, error, candidates=0, sign=sign, scale=touch.scale,
+                                  x=touch.points)
 
 
 def _refined(held, indices, touch, config: FastConfig, chosen: list[dict]) -> list[dict]:
@@ -262,6 +271,7 @@ class _State:
         self.best: dict[int, Registration] = {}
         self.rejected: dict[int, str] = {}
         self.cheapest = {i: np.inf for i in meshes}
+        self.deferred = {i: np.inf for i in meshes}
         self.tried = {i: 0 for i in meshes}
         self.next = {i: 0 for i in meshes}
         self.sizes = {i: len(models[i].model.vertices) for i in meshes}
@@ -271,8 +281,14 @@ class _State:
         return _error(self.best.get(i))
 
     def standing(self, i: int) -> float:
-        """The best score known on model ``i``, refined or cheap (data units)."""
-        return min(self.error(i), self.cheapest.get(i, np.inf))
+        """The best score known on model ``i`` (data units): its best refined error, or the cheap
+        score of a pose deferred unrefined, whichever is lower."""
+        return min(self.error(i), self.deferred.get(i, np.inf))
+
+    def margin(self, e1: float) -> float:
+        """How much worse than ``e1`` another model must fit to be told apart, under the data's
+        noise (:attr:`tactrec.recognition.Recognition.margin`)."""
+        return max(2.0 * self.touch.noise / np.sqrt(len(self.touch.points)), 0.1 * e1)
 
     def leader(self) -> tuple[int | None, float]:
         ranked = sorted(self.best, key=lambda i: (self.error(i), i))
@@ -352,7 +368,7 @@ class FastMethod:
             k = state.next[group[0]]
             group = [i for i in group if state.next[i] == k]
             cost = sum(_tier_cost(config, k, signs, state.sizes[i]) for i in group)
-            if work > 0 and work + cost > config.budget * len(models):
+            if work > 0 and work + cost > config.budget * len(models) * signs:
                 break
             depth = max(depth, k + 1)
             work += self._tier(state, group, k, runner)
@@ -379,6 +395,10 @@ class FastMethod:
         bound = config.ratio * max(min(e1, c_best), state.limit)
         chosen = {i: {key: c[key][c["score"] <= bound] for key in ("R", "t", "score", "sign")}
                   for i, c in cheap.items() if "score" in c and c["score"][0] <= bound}
+        for i, c in cheap.items():
+            left = c.get("score", np.empty(0))[c.get("score", np.empty(0)) > bound]
+            if len(left):
+                state.deferred[i] = min(state.deferred[i], float(left[0]))
         order = sorted(chosen)
         for i, found in zip(order, runner.map(_refined, order, touch, config, items=[chosen[i] for i in order])):
             work += found["queries"]

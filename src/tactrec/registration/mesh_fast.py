@@ -27,7 +27,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..estimation import LocalGeometry
-from ..linalg import compose, rotate, stable_order, transform
+from ..linalg import compose, gram, rotate, solve_spd, stable_order, transform
 from ..surfaces.mesh import MeshModel
 from ..surfaces.mesh_curvature import fitted_frame, quadric_curvatures, tangents
 from .result import Registration, cross, local_frame, point_to_plane_step, rotations_from_vectors, rotations_z
@@ -187,10 +187,33 @@ def starting_poses(model: MeshModel, geometry: LocalGeometry, x: np.ndarray, *, 
     return R, t
 
 
+def contact_spread(model: MeshModel, R: np.ndarray, t: np.ndarray, x: np.ndarray, contact: np.ndarray) -> float:
+    """How well the data ``x (m, 3)`` pin the contact under pose ``R (3, 3), t (3,)``: the root of the
+    trace of the moved contact's covariance (model units), from the pose's covariance
+    ``s^2 (J^T J)^-1`` at the fit (``J`` the point-to-plane Jacobian of :func:`refine`, ``s^2`` the
+    residuals' variance).  Large where the data leave a direction free: along a cylinder's axis,
+    over a flat patch."""
+    moved = transform(R[None], t[None], x)
+    residual, n = _planes(model, moved)
+    J = np.concatenate([cross(moved, n), n], axis=2)[0]                                  # (m, 6)
+    m = len(x)
+    s2 = float(np.sum(residual[0] ** 2)) / max(m - 6, 1)
+    JtJ = gram(J[None])[0]
+    JtJ = JtJ + 1e-9 * (np.trace(JtJ) / 6.0 + 1e-300) * np.eye(6)
+    cov = s2 * solve_spd(np.broadcast_to(JtJ, (6, 6, 6)), np.eye(6))                   # rows: the inverse
+    p = rotate(R, contact) + t
+    Jp = np.zeros((3, 6))
+    Jp[:, :3] = -np.array([[0.0, -p[2], p[1]], [p[2], 0.0, -p[0]], [-p[1], p[0], 0.0]])
+    Jp[:, 3:] = np.eye(3)
+    return float(np.sqrt(max(np.sum(Jp * np.einsum("ij,jk->ik", Jp, cov)), 0.0)))
+
+
 def registration(model: MeshModel, geometry: LocalGeometry, R: np.ndarray, t: np.ndarray, error: float, *,
-                 candidates: int, sign: int = 1, scale: float = 1.0) -> Registration:
-    """The :class:`Registration` of pose ``R (3, 3), t (3,)`` with ``error`` (model units)."""
+                 candidates: int, sign: int = 1, scale: float = 1.0, x: np.ndarray | None = None) -> Registration:
+    """The :class:`Registration` of pose ``R (3, 3), t (3,)`` with ``error`` (model units); with the
+    data ``x``, also how well they pin the contact (:func:`contact_spread`)."""
     _, face, location = model.closest_points(rotate(R, geometry.contact)[None] + t)
+    spread = 0.0 if x is None else contact_spread(model, R, t, x, geometry.contact)
     return Registration(model=model.name, error=float(error), location=location[0], rotation=R, translation=t,
                         candidates=candidates, site=np.array([float(face[0])]), phi=None, normal_sign=sign,
-                        scale=scale)
+                        scale=scale, spread=spread)

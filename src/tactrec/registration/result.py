@@ -40,6 +40,9 @@ class Registration:
         +1 if the data normal was used as estimated, -1 if reversed.
     rejected : str or None
         Why the model was rejected (e.g. ``"no candidates"``).
+    spread : float
+        How well the data pin the contact: the root of the trace of its covariance under the
+        fit (model units; 0 where not computed).
     cheap : float
         For a model the search pruned (its poses came nowhere near the best
         error so far on other models): the best score its cheap stage reached,
@@ -58,6 +61,7 @@ class Registration:
     normal_sign: int = 1
     rejected: str | None = None
     cheap: float = float("inf")
+    spread: float = 0.0
 
     @classmethod
     def rejection(cls, model: str, reason: str, *, scale: float = 1.0, cheap: float = float("inf")) -> "Registration":
@@ -84,6 +88,8 @@ class Registration:
             out["site"] = np.asarray(self.site).tolist()
         if self.phi is not None:
             out["phi"] = float(self.phi)
+        if self.spread > 0:
+            out["contact_sd"] = float(self.spread)
         return out
 
 
