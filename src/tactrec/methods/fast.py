@@ -285,11 +285,6 @@ class _State:
         score of a pose deferred unrefined, whichever is lower."""
         return min(self.error(i), self.deferred.get(i, np.inf))
 
-    def margin(self, e1: float) -> float:
-        """How much worse than ``e1`` another model must fit to be told apart, under the data's
-        noise (:attr:`tactrec.recognition.Recognition.margin`)."""
-        return max(2.0 * self.touch.noise / np.sqrt(len(self.touch.points)), 0.1 * e1)
-
     def leader(self) -> tuple[int | None, float]:
         ranked = sorted(self.best, key=lambda i: (self.error(i), i))
         return (ranked[0], self.error(ranked[0])) if ranked else (None, np.inf)
@@ -396,7 +391,8 @@ class FastMethod:
         chosen = {i: {key: c[key][c["score"] <= bound] for key in ("R", "t", "score", "sign")}
                   for i, c in cheap.items() if "score" in c and c["score"][0] <= bound}
         for i, c in cheap.items():
-            left = c.get("score", np.empty(0))[c.get("score", np.empty(0)) > bound]
+            score = c.get("score", np.empty(0))
+            left = score[score > bound]
             if len(left):
                 state.deferred[i] = min(state.deferred[i], float(left[0]))
         order = sorted(chosen)
