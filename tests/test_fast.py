@@ -430,3 +430,17 @@ def test_a_contact_the_data_leave_free_is_flagged():
             if name == "tube":
                 assert r.ambiguous and reg.spread > LOCATED * reg.error
     assert np.median(ratios["tube"]) > 2 * np.median(ratios["egg"])
+
+
+def test_search_limits_bench_measures_the_index_and_the_basin(tmp_path):
+    """Noise-free P3 touches: the refined true pose is a fit (the basin's ceiling), and the true
+    place has a rank in the search's order."""
+    from tactrec.bench import search_limits
+
+    table = search_limits.run(out=tmp_path, instances=2, models=("banana", "pear"), protocols=("p3",), axes=2,
+                              quiet=True)
+    s = table["summary"]["p3"]
+    assert s["touches"] == 4 and s["basin"]["0"] == 1.0
+    assert sum(s["tiers"].values()) == 4
+    assert all(r["rank"] >= 0 and r["tier"] for r in table["records"])
+    assert "| p3 |" in (tmp_path / "search-limits.md").read_text()

@@ -10,7 +10,7 @@ from __future__ import annotations
 from typing import Callable
 
 from . import (baselines, cold_start, fast_vs_paper, fit_limit, kernels, paper_closedform, paper_example, paper_fig11, paper_mesh,
-               scale)
+               scale, search_limits)
 
 __all__ = ["BENCHMARKS"]
 
@@ -27,4 +27,5 @@ BENCHMARKS: dict[str, Callable[..., dict]] = {
     "fit-limit": fit_limit.run,
     "kernels": kernels.run,
     "cold-start": cold_start.run,
+    "search-limits": search_limits.run,
 }
