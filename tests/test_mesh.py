@@ -320,3 +320,26 @@ def test_face_neighbours_pair_faces_across_their_shared_edges():
             assert face[g, edge[f, k]] == f
     assert face[0, 0] == -1 and face[1, 1] == -1                # the square's outer edges
     assert face[0, 2] == 1 and face[2, 0] == -1                 # the diagonal: first two faces paired
+
+
+def test_paper_like_scans_are_refined_smoothly_and_scaled_into_the_papers_range():
+    """Loop subdivision of a coarse sphere: more vertices, nearer the sphere than the facets were,
+    scaled into 60-95 mm; an edge shared by three faces is repaired first."""
+    from tactrec.surfaces.paper_like import _manifold, paper_like
+
+    coarse = trimesh.creation.icosphere(subdivisions=1, radius=20.0)          # 42 vertices, 40 mm across
+    m = MeshModel(coarse.vertices, coarse.faces, name="ball", units="mm")
+    like = paper_like(m, vertices=600)
+    assert len(like.vertices) >= 600 and like.name == "ball"
+    extent = like.bounds[1] - like.bounds[0]
+    assert np.isclose(extent.max(), 60.0)                                      # 40 mm -> the low end
+    r = np.linalg.norm(like.vertices, axis=1)
+    centroids = np.linalg.norm(like.vertices[like.faces].mean(axis=1), axis=1)
+    coarse_gap = 1 - np.linalg.norm(m.vertices[m.faces].mean(axis=1), axis=1).min() / 20.0
+    assert 1 - centroids.min() / r.max() < coarse_gap / 4                    # facets hug the sphere closer
+    big = paper_like(MeshModel(coarse.vertices * 10, coarse.faces, name="big", units="mm"), vertices=100)
+    assert np.isclose((big.bounds[1] - big.bounds[0]).max(), 95.0)             # 400 mm -> the high end
+    faces = np.vstack([coarse.faces, [[coarse.faces[0, 0], coarse.faces[0, 1], 41]]])   # a third face on an edge
+    assert len(_manifold(faces)) == len(coarse.faces)
+    with pytest.raises(ValueError, match="millimetre"):
+        paper_like(MeshModel(coarse.vertices, coarse.faces, name="m", units="m"))

@@ -27,7 +27,7 @@ from ..errors import InputError
 from ..estimation import estimate
 from ..registration import mesh_paper
 from ..simulation import simulate_touch, spread_vertices
-from ..surfaces import BUILTIN_SETS
+from ..surfaces import BUILTIN_SETS, load_model
 from .common import CORE_SOURCES, default_jobs, instance_rng, run_parallel, saved_record, sources_hash, write_json
 
 __all__ = ["run_fig11", "SWEEPS", "DEFAULTS"]
@@ -44,19 +44,28 @@ PAPER = {"delta": {"0.005": {"success": 37, "seconds": 4}, "0.03": {"success": 9
          "length": {"9": {"success": 63}, "24": {"success": 93}},
          "angle": {"10": {"success": 69}, "60": {"success": 93}}}
 
+#: the scans to run on: as shipped, or made like the paper's (:func:`tactrec.surfaces.paper_like.paper_like`)
+SCANS = ("shipped", "paper-like")
+
 _DB = {}
 
 
-def _database(models: tuple[str, ...]):
-    if models not in _DB:
-        _DB[models] = build_entries(models)
-    return _DB[models]
+def _database(models: tuple[str, ...], scans: str = "shipped"):
+    if (models, scans) not in _DB:
+        if scans == "paper-like":
+            from ..database import Database, _entry
+            from ..surfaces.paper_like import paper_like
+
+            _DB[models, scans] = Database([_entry(paper_like(load_model(m))) for m in models])
+        else:
+            _DB[models, scans] = build_entries(models)
+    return _DB[models, scans]
 
 
 def _touch(task):
     """One touch: recognise it, keeping every candidate's walk, for all deltas <= ``delta``."""
-    models, m_index, instance, seed, length, angle, deltas = task
-    db = _database(models)
+    models, m_index, instance, seed, length, angle, deltas, scans = task
+    db = _database(models, scans)
     entry = db.entries[m_index]
     rng = instance_rng(seed, m_index, instance)
     vertices = spread_vertices(entry.model, instance + 1, rings=15, rng=instance_rng(seed, m_index))
@@ -136,7 +145,7 @@ def _why_missed(record: dict, delta) -> str | None:
 
 
 def _task_key(task) -> str:
-    models, m_index, instance, seed, length, angle, deltas = task
+    models, m_index, instance, seed, length, angle, deltas, scans = task
     return f"{models[m_index]}-{instance}-l{length:g}-phi{angle:g}"
 
 
@@ -148,17 +157,22 @@ def _code_hash() -> str:
 def _touch_saved(job):
     """Run one task, or reuse its record from an interrupted run of the same code and settings."""
     task, folder = job
-    models, _, _, seed, _, _, deltas = task
-    settings = {"models": list(models), "seed": seed, "deltas": list(deltas)}
+    models, _, _, seed, _, _, deltas, scans = task
+    settings = {"models": list(models), "seed": seed, "deltas": list(deltas), "scans": scans}
     saved = saved_record(folder / f"{_task_key(task)}.json", lambda: {"settings": settings, "record": _touch(task)},
                          accept=lambda s: s.get("settings") == settings)
     return saved["record"]
 
 
 def run_fig11(*, out, instances: int = 10, seed: int = 0, jobs: int | None = None, quiet: bool = False,
-              method: str = "paper", models: tuple[str, ...] | None = None, sweeps: dict | None = None) -> dict:
-    """P3 / Fig. 11: success rate and time per recognition along the three sweeps."""
+              method: str = "paper", models: tuple[str, ...] | None = None, sweeps: dict | None = None,
+              scans: str = "shipped") -> dict:
+    """P3 / Fig. 11: success rate and time per recognition along the three sweeps, on the scans as
+    shipped or made like the paper's (``scans``, one of :data:`SCANS`)."""
+    if scans not in SCANS:
+        raise InputError(f"unknown scans {scans!r}; choose from {', '.join(SCANS)}")
     out = Path(out)
+    name = "paper-fig11" if scans == "shipped" else f"paper-fig11-{scans}"
     models = tuple(models or BUILTIN_SETS["paper-fig11"])
     sweeps = sweeps or SWEEPS
     configs = {(DEFAULTS["length"], DEFAULTS["angle"]): sorted(set(sweeps["delta"]) | {DEFAULTS["delta"]})}
@@ -166,10 +180,10 @@ def run_fig11(*, out, instances: int = 10, seed: int = 0, jobs: int | None = Non
         configs.setdefault((length, DEFAULTS["angle"]), [DEFAULTS["delta"]])
     for angle in sweeps["angle"]:
         configs.setdefault((DEFAULTS["length"], angle), [DEFAULTS["delta"]])
-    tasks = [(models, m, i, seed, length, angle, deltas) for (length, angle), deltas in configs.items()
+    tasks = [(models, m, i, seed, length, angle, deltas, scans) for (length, angle), deltas in configs.items()
              for m in range(len(models)) for i in range(instances)]
     # each touch's record is saved as it completes, so an interrupted run resumes where it stopped
-    parts = Path(out) / "paper-fig11.parts" / _code_hash()
+    parts = Path(out) / f"{name}.parts" / _code_hash()
     parts.mkdir(parents=True, exist_ok=True)
     records = run_parallel(_touch_saved, [(t, parts) for t in tasks], jobs=jobs or default_jobs(), quiet=quiet,
                            desc="paper-fig11")
@@ -186,16 +200,16 @@ def run_fig11(*, out, instances: int = 10, seed: int = 0, jobs: int | None = Non
                 "median_seconds": float(np.median([r["seconds"] for r in rows])), "touches": len(rows),
                 "misses": misses}
 
-    table = {"benchmark": "paper-fig11", "method": method, "instances": instances, "seed": seed,
+    table = {"benchmark": name, "scans": scans, "method": method, "instances": instances, "seed": seed,
              "models": list(models), "spacing_mm": SPACING, "defaults": DEFAULTS, "paper": PAPER,
              "delta": {str(d): summary(DEFAULTS["length"], DEFAULTS["angle"], d) for d in sweeps["delta"]},
              "length": {str(l): summary(l, DEFAULTS["angle"], DEFAULTS["delta"]) for l in sweeps["length"]},
              "angle": {str(a): summary(DEFAULTS["length"], a, DEFAULTS["delta"]) for a in sweeps["angle"]},
              "records": records}
     out.mkdir(parents=True, exist_ok=True)
-    write_json(out / "paper-fig11.json", table)
-    table["plots"] = [str(_plot(table, out))]
-    lines = [f"P3 / Fig. 11: {len(models)} YCB scans, {instances} touches each per setting (seed {seed})"]
+    write_json(out / f"{name}.json", table)
+    table["plots"] = [str(_plot(table, out, name))]
+    lines = [f"P3 / Fig. 11: {len(models)} YCB scans ({scans}), {instances} touches each per setting (seed {seed})"]
     for key, unit in (("delta", "1/mm"), ("length", "mm"), ("angle", "deg")):
         lines.append(f"  {key} ({unit}): " + ", ".join(
             f"{k}: {v['success_percent']:.0f}% {v['median_seconds']:.1f}s" for k, v in table[key].items()))
@@ -208,7 +222,7 @@ def run_fig11(*, out, instances: int = 10, seed: int = 0, jobs: int | None = Non
     return table
 
 
-def _plot(table, out: Path) -> Path:
+def _plot(table, out: Path, name: str) -> Path:
     from ..plots import _plt, save_figure
 
     plt = _plt()
@@ -226,6 +240,6 @@ def _plot(table, out: Path) -> Path:
         ax.set_ylabel("success rate (%)")
         ax.set_ylim(0, 105)
     axes[0].legend(fontsize=8, loc="lower right")
-    path = out / "paper-fig11.png"
+    path = out / f"{name}.png"
     save_figure(fig, path)
     return path
