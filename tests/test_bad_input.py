@@ -476,6 +476,12 @@ def test_bench_unknown_benchmark(tmp_path, capsys):
     assert files_in(tmp_path) == []
 
 
+def test_bench_scans_option_belongs_to_paper_fig11(tmp_path, capsys):
+    bad(capsys, ["bench", "kernels", "--scans", "paper-like", "--out", tmp_path / "bench"], "kernels",
+        "--scans applies to paper-fig11 only")
+    assert files_in(tmp_path) == []
+
+
 @pytest.mark.parametrize("argv, name, problem", [
     ([], "command", "required"),
     (["simulate", "monkey-saddle"], "--out", "required"),
