@@ -183,3 +183,18 @@ def test_closed_form_and_ycb_database_built_once_used_and_updated(tmp_path, caps
     assert main(["build", "closed-form", *map(str, scans), "--units", "m", "--out", str(db)]) == 0
     out = capsys.readouterr().out
     assert "1 built, 17 unchanged" in out and f"built    {scans[3].stem}" in out
+
+
+def test_bench_paper_table5_fills_every_cell_and_tells_the_sphere_apart(tmp_path):
+    """Table 5's bookkeeping, one touch per object and spacing: every cell has the paper's value
+    beside ours, and at 0.5 mm the sphere (doubly curved) is told from the three cylinders."""
+    from tactrec.bench import paper_table5
+
+    table = paper_table5.run(out=tmp_path, instances=1, quiet=True)
+    assert set(table["errors"]) == {"0.05", "0.5"}
+    for d in table["errors"].values():
+        for method in ("paper", "fast"):
+            assert set(d[method]) == set(table["objects"])
+    got = table["recognised"]["0.5"]
+    assert got["paper"]["sphere-33"] == got["fast"]["sphere-33"] == 1
+    assert "| sphere-33 |" in (tmp_path / "paper-table5.md").read_text()

@@ -10,7 +10,7 @@ from __future__ import annotations
 from typing import Callable
 
 from . import (baselines, cold_start, fast_vs_paper, fit_limit, kernels, paper_closedform, paper_example, paper_fig11, paper_mesh,
-               scale, search_limits)
+               paper_table5, scale, search_limits)
 
 __all__ = ["BENCHMARKS"]
 
@@ -20,6 +20,7 @@ BENCHMARKS: dict[str, Callable[..., dict]] = {
     "paper-example": paper_example.run,
     "paper-table4": paper_mesh.run_table4,
     "paper-fig11": paper_fig11.run_fig11,
+    "paper-table5": paper_table5.run,
     "fast-vs-paper": fast_vs_paper.run,
     "scale": scale.run_scale,
     "scale-exhaustive": scale.run_exhaustive,
