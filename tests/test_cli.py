@@ -198,3 +198,18 @@ def test_bench_paper_table5_fills_every_cell_and_tells_the_sphere_apart(tmp_path
     got = table["recognised"]["0.5"]
     assert got["paper"]["sphere-33"] == got["fast"]["sphere-33"] == 1
     assert "| sphere-33 |" in (tmp_path / "paper-table5.md").read_text()
+
+
+def test_bench_paper_table6_fills_the_matrix_and_counts_nc_cells(tmp_path):
+    """Table 6's bookkeeping on two scans, one touch each: every cell is an error or NC, the NC
+    count is the cells without one, and the paper's summary is printed beside ours."""
+    from tactrec.bench import paper_table6
+
+    table = paper_table6.run(out=tmp_path, models=("banana", "strawberry"), quiet=True)
+    for method in ("paper", "fast"):
+        s = table["summary"][method]
+        assert set(s["errors"]) == {"banana", "strawberry"}
+        assert s["nc_cells"] == sum(v is None for row in s["errors"].values() for v in row.values())
+        assert all(v is None or v > 0 for row in s["errors"].values() for v in row.values())
+    text = (tmp_path / "paper-table6.md").read_text()
+    assert "| strawberry |" in text and "the paper (its own ten objects): 10 of 10" in text
