@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from ..database import build_entries
+from ..errors import InputError
 from ..estimation import estimate
 from ..io.atomic import write_text_atomic
 from ..recognition import recognize
@@ -69,11 +70,16 @@ def _touch(task) -> dict:
     site = [int(vertices[min(instance, len(vertices) - 1)])]
     data = simulate_touch(entry.model, site, rng=instance_rng(seed, m_index, instance, 6), noise=noise(), **CONFIG)
     truth = data.meta["truth"]
-    geometry = estimate(data)
     # the truth's own fit, each method's way: eq. 15 at the touched vertex (best 10-degree rotation),
     # and the true pose refined on exact distances
-    R, t, refined, _ = mesh_fast.refine(entry.model, np.asarray(truth["rotation"])[None],
+    _, _, refined, _ = mesh_fast.refine(entry.model, np.asarray(truth["rotation"])[None],
                                         np.asarray(truth["translation"])[None], data.points, iterations=20)
+    try:
+        geometry = estimate(data)
+    except InputError as exc:                    # counted as a miss of both methods, not the end of the run
+        return {"object": entry.name, "instance": instance, "site": site, "failed": str(exc),
+                "truth": {"paper": None, "fast": float(refined[0])},
+                "methods": {m: {"recognized": None, "seconds": 0.0, "errors": {}} for m in METHODS}}
     at_touch = mesh_paper.MeshSuperposition(entry.model, geometry, data.curves, phi_step=10.0).error(site[0])[0]
     out = {"object": entry.name, "instance": instance, "site": site, "methods": {},
            "truth": {"paper": float(at_touch), "fast": float(refined[0])}}
@@ -146,9 +152,11 @@ def _markdown(table: dict) -> str:
 
 
 def _why_missed(record: dict, method: str) -> str:
-    """Why a touch was missed: ``no_candidate`` (paper: the right model NC); ``outfitted`` (the
+    """Why a touch was missed: ``estimate_failed`` (the curves gave no estimate); ``no_candidate`` (paper: the right model NC); ``outfitted`` (the
     winner fits better than the truth itself does, by the method's own error: no search would
     help); ``search_miss`` (the truth fits better, but the search did not find it)."""
+    if "failed" in record:
+        return "estimate_failed"
     result = record["methods"][method]
     own = result["errors"].get(record["object"])
     if method == "paper" and own is None:
