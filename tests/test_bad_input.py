@@ -479,6 +479,8 @@ def test_bench_unknown_benchmark(tmp_path, capsys):
 def test_bench_scans_option_belongs_to_paper_fig11(tmp_path, capsys):
     bad(capsys, ["bench", "kernels", "--scans", "paper-like", "--out", tmp_path / "bench"], "kernels",
         "--scans applies to paper-fig11 only")
+    bad(capsys, ["bench", "kernels", "--delta-only", "--out", tmp_path / "bench"], "kernels",
+        "--delta-only applies to paper-fig11 only")
     assert files_in(tmp_path) == []
 
 

@@ -188,14 +188,19 @@ def cmd_bench(args) -> int:
         raise InputError(f"unknown benchmark; available: {', '.join(sorted(BENCHMARKS))}", args.name)
     out = Path(args.out) if args.out else Path("bench-out")
     extra = {}
+    for option, value in (("--scans", args.scans), ("--delta-only", args.delta_only or None)):
+        if value is not None and args.name != "paper-fig11":
+            raise InputError(f"{option} applies to paper-fig11 only", args.name)
     if args.scans is not None:
-        if args.name != "paper-fig11":
-            raise InputError("--scans applies to paper-fig11 only", args.name)
         extra["scans"] = args.scans
+    if args.delta_only:
+        from .bench.paper_fig11 import DEFAULTS, SWEEPS
+
+        extra["sweeps"] = {"delta": SWEEPS["delta"], "length": [DEFAULTS["length"]], "angle": [DEFAULTS["angle"]]}
     table = BENCHMARKS[args.name](out=out, instances=args.instances, seed=args.seed, jobs=args.jobs,
                                   quiet=args.quiet, method=args.method, **extra)
     print(table["text"])
-    print(f"wrote {out / (args.name + '.json')}" + "".join(f", {p}" for p in table.get("plots", [])))
+    print(f"wrote {out / (table.get('benchmark', args.name) + '.json')}" + "".join(f", {p}" for p in table.get("plots", [])))
     return 0
 
 
@@ -284,6 +289,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scans", choices=("shipped", "paper-like"), default=None,
                    help="paper-fig11: the YCB scans as shipped (default), or scaled to 60-95 mm and "
                         "Loop-subdivided to the paper's resolution")
+    p.add_argument("--delta-only", action="store_true",
+                   help="paper-fig11: only the delta sweep (one recognition per touch), l and phi at the defaults")
     p.add_argument("--out", metavar="DIR", help="output folder (default bench-out)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_bench)
