@@ -200,7 +200,8 @@ def cmd_bench(args) -> int:
     table = BENCHMARKS[args.name](out=out, instances=args.instances, seed=args.seed, jobs=args.jobs,
                                   quiet=args.quiet, method=args.method, **extra)
     print(table["text"])
-    print(f"wrote {out / (table.get('benchmark', args.name) + '.json')}" + "".join(f", {p}" for p in table.get("plots", [])))
+    written = out / (table.get("benchmark", args.name) + ".json")
+    print(f"wrote {written}" + "".join(f", {p}" for p in table.get("plots", [])))
     return 0
 
 

@@ -15,7 +15,7 @@ import numpy as np
 from ..io.atomic import write_text_atomic
 
 __all__ = ["paper_values", "instance_rng", "run_parallel", "write_json", "default_jobs", "sources_hash",
-           "saved_record", "recognizer", "CORE_SOURCES"]
+           "saved_record", "recognizer", "CORE_SOURCES", "errors_on_every_model", "error_cell"]
 
 #: the recognizers a benchmark process keeps, by models and options (their worker processes end with it)
 _RECOGNIZERS: dict = {}
@@ -112,3 +112,22 @@ def saved_record(path: Path, compute: Callable[[], dict], *, accept: Callable[[d
     record = compute()
     write_json(path, record)
     return record
+
+
+def errors_on_every_model(data, entries, *, method: str, **options) -> dict:
+    """One recognition of ``data`` against ``entries``, in this process: the model recognised, the
+    wall time and every model's registration error in the data's units (None where the model was
+    rejected or left unregistered)."""
+    import time
+
+    from ..recognition import recognize
+
+    start = time.perf_counter()
+    result = recognize(data, entries, method=method, **options)
+    return {"recognized": result.best, "seconds": time.perf_counter() - start,
+            "errors": {r.model: (r.error / r.scale if r.ok else None) for r in result.ranking}}
+
+
+def error_cell(value, missing: str = "NC") -> str:
+    """A registration error in a printed table (``missing`` where there is none)."""
+    return missing if value is None else f"{value:.3f}"

@@ -24,17 +24,15 @@ instances, a cell is the median over the touches.
 from __future__ import annotations
 
 import functools
-import time
 from pathlib import Path
 
 import numpy as np
 
 from ..database import build_entries
 from ..io.atomic import write_text_atomic
-from ..recognition import recognize
 from ..simulation import simulate_random_touch
 from ..surfaces import BUILTIN_SETS
-from .common import instance_rng, run_parallel, write_json
+from .common import error_cell, errors_on_every_model, instance_rng, run_parallel, write_json
 
 __all__ = ["run", "PAPER", "CONFIG"]
 
@@ -71,11 +69,7 @@ def _touch(task) -> dict:
                                  noise=noise_for(entry.name), spacing=spacing, **CONFIG)
     out = {"object": entry.name, "instance": instance, "spacing": spacing, "methods": {}}
     for method in METHODS:
-        start = time.perf_counter()
-        result = recognize(data, db.entries, method=method)
-        out["methods"][method] = {
-            "recognized": result.best, "seconds": time.perf_counter() - start,
-            "errors": {r.model: (r.error / r.scale if r.ok else None) for r in result.ranking}}
+        out["methods"][method] = errors_on_every_model(data, db.entries, method=method)
     return out
 
 
@@ -107,9 +101,6 @@ def run(*, out, instances: int = 1, seed: int = 0, jobs: int | None = None, quie
     return table
 
 
-def _cell(value) -> str:
-    return "NC" if value is None else f"{value:.3f}"
-
 
 def _markdown(table: dict) -> str:
     objects, n = table["objects"], table["instances"]
@@ -122,8 +113,9 @@ def _markdown(table: dict) -> str:
         lines += ["", f"Points {d:g} mm apart (curves {40 * d:g} mm long):", "",
                   "| model | " + " | ".join(objects) + " |", "|---" * (len(objects) + 1) + "|"]
         for m in objects:
-            cells = [f"{_cell(table['errors'][key]['paper'][m][o])} / {_cell(table['errors'][key]['fast'][m][o])} "
-                     f"/ {table['paper'][m][o]:.3f}" for o in objects]
+            ours = table["errors"][key]
+            cells = [f"{error_cell(ours['paper'][m][o])} / {error_cell(ours['fast'][m][o])} / "
+                     f"{table['paper'][m][o]:.3f}" for o in objects]
             lines.append(f"| {m} | " + " | ".join(cells) + " |")
         lines.append("")
         for method in METHODS:

@@ -15,7 +15,7 @@ own error; or the search did not find the truth's better fit).
 
 The objects differ, so the paper's cells do not compare one by one; its
 summary does: 10 of 10 recognised, the right model's error 0.072-0.249 mm
-(median 0.131), 9 NC cells of 90, 3.4-19.3 s per recognition against ten
+(median 0.131), 9 NC cells of 100, 3.4-19.3 s per recognition against ten
 models.  That diagonal is the robot data's noise, so the touches get
 Gaussian noise whose perfect fit has the paper's median diagonal error,
 ``sigma = 0.131 sqrt(pi / 2) = 0.164 mm`` (as for Table 5).  The outward
@@ -25,7 +25,6 @@ side is given.  With several instances, a cell is the median.
 from __future__ import annotations
 
 import functools
-import time
 from pathlib import Path
 
 import numpy as np
@@ -34,11 +33,10 @@ from ..database import build_entries
 from ..errors import InputError
 from ..estimation import estimate
 from ..io.atomic import write_text_atomic
-from ..recognition import recognize
 from ..registration import mesh_fast, mesh_paper
 from ..simulation import simulate_touch, spread_vertices
 from ..surfaces import BUILTIN_SETS
-from .common import instance_rng, run_parallel, write_json
+from .common import error_cell, errors_on_every_model, instance_rng, run_parallel, write_json
 
 __all__ = ["run", "PAPER", "CONFIG", "DELTA"]
 
@@ -85,11 +83,7 @@ def _touch(task) -> dict:
            "truth": {"paper": float(at_touch), "fast": float(refined[0])}}
     for method in METHODS:
         options = {"delta": DELTA} if method == "paper" else {}
-        start = time.perf_counter()
-        result = recognize(data, db.entries, method=method, **options)
-        out["methods"][method] = {
-            "recognized": result.best, "seconds": time.perf_counter() - start,
-            "errors": {r.model: (r.error / r.scale if r.ok else None) for r in result.ranking}}
+        out["methods"][method] = errors_on_every_model(data, db.entries, method=method, **options)
     return out
 
 
@@ -134,15 +128,16 @@ def _markdown(table: dict) -> str:
              "unregistered, its cheap scores far beyond the best; in most touches)."]
     lines += ["", "| model | " + " | ".join(models) + " |", "|---" * (len(models) + 1) + "|"]
     for m in models:
-        cells = [f"{_cell(table['summary']['paper']['errors'][m][o])} / "
-                 f"{_cell(table['summary']['fast']['errors'][m][o], '-')}" for o in models]
+        cells = [f"{error_cell(table['summary']['paper']['errors'][m][o])} / "
+                 f"{error_cell(table['summary']['fast']['errors'][m][o], '-')}" for o in models]
         lines.append(f"| {m} | " + " | ".join(cells) + " |")
     lines.append("")
     p = table["paper"]
     for method in METHODS:
         s = table["summary"][method]
         lines.append(f"- {method}: {sum(s['recognised'].values())} of {n * len(models)} recognised; "
-                     f"{s['nc_cells']} {'NC' if method == 'paper' else 'unregistered'} cells of {len(models) ** 2}; {s['seconds']['median']:.2f} s median, "
+                     f"{s['nc_cells']} {'NC' if method == 'paper' else 'unregistered'} cells of {len(models) ** 2}; "
+                     f"{s['seconds']['median']:.2f} s median, "
                      f"{s['seconds']['max']:.2f} s max per recognition"
                      + ("; misses: " + ", ".join(f"{k} {v}" for k, v in s["misses"].items()) if s["misses"] else "")
                      + ".")
@@ -152,9 +147,10 @@ def _markdown(table: dict) -> str:
 
 
 def _why_missed(record: dict, method: str) -> str:
-    """Why a touch was missed: ``estimate_failed`` (the curves gave no estimate); ``no_candidate`` (paper: the right model NC); ``outfitted`` (the
-    winner fits better than the truth itself does, by the method's own error: no search would
-    help); ``search_miss`` (the truth fits better, but the search did not find it)."""
+    """Why a touch was missed: ``estimate_failed`` (the curves gave no estimate); ``no_candidate``
+    (paper: the right model NC); ``outfitted`` (the winner fits better than the truth itself does,
+    by the method's own error: no search would help); ``search_miss`` (the truth fits better, but
+    the search did not find it)."""
     if "failed" in record:
         return "estimate_failed"
     result = record["methods"][method]
@@ -166,6 +162,3 @@ def _why_missed(record: dict, method: str) -> str:
         return "outfitted"
     return "search_miss"
 
-
-def _cell(value, missing: str = "NC") -> str:
-    return missing if value is None else f"{value:.3f}"

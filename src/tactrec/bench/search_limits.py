@@ -105,7 +105,8 @@ def run(*, out, instances: int = 10, seed: int = 0, jobs: int | None = None, qui
         ranks = np.array([r["rank"] for r in rows])
         summary[protocol] = {
             "touches": len(rows),
-            "rank": {q: float(np.percentile(ranks, p, method="lower")) for q, p in (("median", 50), ("p75", 75), ("p90", 90))},
+            "rank": {q: float(np.percentile(ranks, p, method="lower"))
+                     for q, p in (("median", 50), ("p75", 75), ("p90", 90))},
             "tiers": {name: sum(r["tier"] == name for r in rows) for name in
                       [f"tier {k + 1}" for k in range(len(TIERS))] + ["beyond"]},
             "basin": {a: float(np.mean([r["basin"][a] for r in rows])) for a in rows[0]["basin"]},
