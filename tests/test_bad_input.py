@@ -476,11 +476,17 @@ def test_bench_unknown_benchmark(tmp_path, capsys):
     assert files_in(tmp_path) == []
 
 
-def test_bench_scans_option_belongs_to_paper_fig11(tmp_path, capsys):
+def test_bench_sweep_options_belong_to_their_benchmarks(tmp_path, capsys):
     bad(capsys, ["bench", "kernels", "--scans", "paper-like", "--out", tmp_path / "bench"], "kernels",
-        "--scans applies to paper-fig11 only")
+        "--scans applies to paper-fig11 and paper-table6 only")
     bad(capsys, ["bench", "kernels", "--delta-only", "--out", tmp_path / "bench"], "kernels",
         "--delta-only applies to paper-fig11 only")
+    bad(capsys, ["bench", "paper-table6", "--lengths", "9,24", "--out", tmp_path / "bench"], "paper-table6",
+        "--lengths applies to paper-fig11 only")
+    bad(capsys, ["bench", "paper-fig11", "--delta-only", "--angles", "10", "--out", tmp_path / "bench"],
+        "paper-fig11", "--delta-only leaves l and phi at the defaults")
+    bad(capsys, ["bench", "paper-fig11", "--lengths", "9,-1", "--out", tmp_path / "bench"], "--lengths",
+        "positive")
     assert files_in(tmp_path) == []
 
 

@@ -198,6 +198,25 @@ def test_bench_paper_table5_fills_every_cell_and_tells_the_sphere_apart(tmp_path
     got = table["recognised"]["0.5"]
     assert got["paper"]["sphere-33"] == got["fast"]["sphere-33"] == 1
     assert "| sphere-33 |" in (tmp_path / "paper-table5.md").read_text()
+    for d, by_method in table["misses"].items():      # every miss is classified, once
+        for method, kinds in by_method.items():
+            assert sum(kinds.values()) == 4 - sum(table["recognised"][d][method].values())
+            assert set(kinds) <= {"no_candidate", "within_noise", "beyond_noise"}
+
+
+def test_within_noise_holds_a_right_fit_against_its_expected_error_at_about_95_percent():
+    """The noise test on the data's own fit: the mean distance of a right fit under Gaussian noise
+    (half-normal distances) lies within two standard errors of its expectation in about 95% of
+    draws, and a fit 30% worse on 63 points is outside them in every draw."""
+    from tactrec.bench.common import within_noise
+
+    rng = np.random.default_rng(5)
+    sigma, points = 0.164, 63
+    expected = sigma * np.sqrt(2 / np.pi)
+    fits = np.abs(rng.normal(0, sigma, (2000, points))).mean(axis=1)
+    held = np.mean([within_noise(f, expected, points=points, fit=f) for f in fits])
+    assert 0.92 <= held <= 0.98
+    assert not any(within_noise(f, 1.3 * f, points=points, fit=f) for f in fits)
 
 
 def test_bench_paper_table6_fills_the_matrix_and_counts_nc_cells(tmp_path):
@@ -211,5 +230,7 @@ def test_bench_paper_table6_fills_the_matrix_and_counts_nc_cells(tmp_path):
         assert set(s["errors"]) == {"banana", "strawberry"}
         assert s["nc_cells"] == sum(v is None for row in s["errors"].values() for v in row.values())
         assert all(v is None or v > 0 for row in s["errors"].values() for v in row.values())
+        assert sum(s["misses"].values()) == 2 - sum(s["recognised"].values())
+        assert set(s["misses"]) <= {"estimate_failed", "no_candidate", "within_noise", "outfitted", "search_miss"}
     text = (tmp_path / "paper-table6.md").read_text()
     assert "| strawberry |" in text and "the paper (its own ten objects): 10 of 10" in text

@@ -47,6 +47,11 @@ def _positive(text: str) -> float:
     return value
 
 
+def _positives(text: str) -> list[float]:
+    """Comma-separated positive numbers (an argparse type)."""
+    return [_positive(x) for x in text.split(",")]
+
+
 def _nonnegative(text: str) -> float:
     try:
         value = float(text)
@@ -188,15 +193,23 @@ def cmd_bench(args) -> int:
         raise InputError(f"unknown benchmark; available: {', '.join(sorted(BENCHMARKS))}", args.name)
     out = Path(args.out) if args.out else Path("bench-out")
     extra = {}
-    for option, value in (("--scans", args.scans), ("--delta-only", args.delta_only or None)):
+    if args.scans is not None and args.name not in ("paper-fig11", "paper-table6"):
+        raise InputError("--scans applies to paper-fig11 and paper-table6 only", args.name)
+    for option, value in (("--delta-only", args.delta_only or None), ("--lengths", args.lengths),
+                          ("--angles", args.angles)):
         if value is not None and args.name != "paper-fig11":
             raise InputError(f"{option} applies to paper-fig11 only", args.name)
+    if args.delta_only and (args.lengths or args.angles):
+        raise InputError("--delta-only leaves l and phi at the defaults; give it or --lengths/--angles", args.name)
     if args.scans is not None:
         extra["scans"] = args.scans
-    if args.delta_only:
+    if args.delta_only or args.lengths or args.angles:
         from .bench.paper_fig11 import DEFAULTS, SWEEPS
 
-        extra["sweeps"] = {"delta": SWEEPS["delta"], "length": [DEFAULTS["length"]], "angle": [DEFAULTS["angle"]]}
+        defaults = args.delta_only
+        extra["sweeps"] = {"delta": SWEEPS["delta"],
+                           "length": [DEFAULTS["length"]] if defaults else args.lengths or SWEEPS["length"],
+                           "angle": [DEFAULTS["angle"]] if defaults else args.angles or SWEEPS["angle"]}
     table = BENCHMARKS[args.name](out=out, instances=args.instances, seed=args.seed, jobs=args.jobs,
                                   quiet=args.quiet, method=args.method, **extra)
     print(table["text"])
@@ -288,10 +301,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--method", choices=sorted(METHODS), default="paper",
                    help="method of the paper-* reproductions (default paper)")
     p.add_argument("--scans", choices=("shipped", "paper-like"), default=None,
-                   help="paper-fig11: the YCB scans as shipped (default), or scaled to 60-95 mm and "
+                   help="paper-fig11, paper-table6: the YCB scans as shipped (default), or scaled to 60-95 mm and "
                         "Loop-subdivided to the paper's resolution")
     p.add_argument("--delta-only", action="store_true",
                    help="paper-fig11: only the delta sweep (one recognition per touch), l and phi at the defaults")
+    p.add_argument("--lengths", type=_positives, default=None, metavar="MM,...",
+                   help="paper-fig11: the curve lengths l of the l sweep (default 9,12,15,18,21,24)")
+    p.add_argument("--angles", type=_positives, default=None, metavar="DEG,...",
+                   help="paper-fig11: the plane separations phi of the phi sweep (default 10,20,30,40,50,60)")
     p.add_argument("--out", metavar="DIR", help="output folder (default bench-out)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_bench)

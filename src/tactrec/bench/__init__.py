@@ -9,9 +9,8 @@ from __future__ import annotations
 
 from typing import Callable
 
-from . import (baselines, cold_start, fast_vs_paper, fit_limit, kernels, paper_closedform, paper_example, paper_fig11, paper_mesh,
-               paper_table5, paper_table6, scale,
-               search_limits)
+from . import (baselines, cold_start, fast_vs_paper, fit_limit, kernels, paper_closedform, paper_example, paper_fig11,
+               paper_mesh, paper_table5, paper_table6, scale, search_limits)
 
 __all__ = ["BENCHMARKS"]
 

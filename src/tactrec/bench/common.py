@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import sys
@@ -15,7 +16,8 @@ import numpy as np
 from ..io.atomic import write_text_atomic
 
 __all__ = ["paper_values", "instance_rng", "run_parallel", "write_json", "default_jobs", "sources_hash",
-           "saved_record", "recognizer", "CORE_SOURCES", "errors_on_every_model", "error_cell"]
+           "saved_record", "recognizer", "CORE_SOURCES", "errors_on_every_model", "error_cell", "SCANS",
+           "scan_database", "within_noise"]
 
 #: the recognizers a benchmark process keeps, by models and options (their worker processes end with it)
 _RECOGNIZERS: dict = {}
@@ -30,6 +32,28 @@ def recognizer(models, *, method: str = "fast", **options):
     if key not in _RECOGNIZERS:
         _RECOGNIZERS[key] = (Recognizer(models, method=method, workers=default_workers(), **options), list(models))
     return _RECOGNIZERS[key][0]
+
+
+#: the kinds of scan a benchmark runs on: as shipped, or made like the paper's
+#: (:func:`tactrec.surfaces.paper_like.paper_like`: 60-95 mm across, at least 42,000 vertices)
+SCANS = ("shipped", "paper-like")
+
+
+@functools.lru_cache(maxsize=2)
+def scan_database(models: tuple[str, ...], scans: str = "shipped"):
+    """The built-in ``models`` with their tables, as shipped or made like the paper's (``scans``, one of
+    :data:`SCANS`), kept for the rest of this process."""
+    from ..database import Database, _entry, build_entries
+    from ..errors import InputError
+    from ..surfaces import load_model
+
+    if scans == "shipped":
+        return build_entries(models)
+    if scans == "paper-like":
+        from ..surfaces.paper_like import paper_like
+
+        return Database([_entry(paper_like(load_model(m))) for m in models])
+    raise InputError(f"unknown scans {scans!r}; choose from {', '.join(SCANS)}")
 
 
 def paper_values() -> dict:
@@ -131,3 +155,12 @@ def errors_on_every_model(data, entries, *, method: str, **options) -> dict:
 def error_cell(value, missing: str = "NC") -> str:
     """A registration error in a printed table (``missing`` where there is none)."""
     return missing if value is None else f"{value:.3f}"
+
+
+def within_noise(a: float, b: float, *, points: int, fit: float) -> bool:
+    """Whether two fits' mean distances ``a`` and ``b`` (eq. 8) to the same ``points`` data points are
+    within the noise: at most two standard errors apart, the standard error of a fit of mean
+    distance ``fit`` under the data's own noise.  Under Gaussian noise the distances of a right fit
+    are half-normal, whose spread is ``sqrt(pi / 2 - 1)`` times their mean, so another draw of the
+    same noise moves ``fit`` by about ``fit sqrt(pi / 2 - 1) / sqrt(points)``."""
+    return abs(a - b) <= 2.0 * fit * np.sqrt(np.pi / 2 - 1) / np.sqrt(points)

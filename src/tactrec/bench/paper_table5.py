@@ -32,7 +32,7 @@ from ..database import build_entries
 from ..io.atomic import write_text_atomic
 from ..simulation import simulate_random_touch
 from ..surfaces import BUILTIN_SETS
-from .common import error_cell, errors_on_every_model, instance_rng, run_parallel, write_json
+from .common import error_cell, errors_on_every_model, instance_rng, run_parallel, within_noise, write_json
 
 __all__ = ["run", "PAPER", "CONFIG"]
 
@@ -67,7 +67,7 @@ def _touch(task) -> dict:
     entry = db.entries[o_index]
     data = simulate_random_touch(entry.model, rng=instance_rng(seed, o_index, instance),
                                  noise=noise_for(entry.name), spacing=spacing, **CONFIG)
-    out = {"object": entry.name, "instance": instance, "spacing": spacing, "methods": {}}
+    out = {"object": entry.name, "instance": instance, "spacing": spacing, "methods": {}, "points": len(data.points)}
     for method in METHODS:
         out["methods"][method] = errors_on_every_model(data, db.entries, method=method)
     return out
@@ -80,7 +80,7 @@ def run(*, out, instances: int = 1, seed: int = 0, jobs: int | None = None, quie
     out = Path(out)
     tasks = [(o, i, seed, d) for d in SPACINGS for o in range(len(OBJECTS)) for i in range(instances)]
     records = run_parallel(_touch, tasks, jobs=jobs or 1, quiet=quiet, desc="paper-table5")
-    matrix, recognised = {}, {}
+    matrix, recognised, misses = {}, {}, {}
     for d in SPACINGS:
         for method in METHODS:
             cells = {m: {} for m in OBJECTS}
@@ -92,9 +92,12 @@ def run(*, out, instances: int = 1, seed: int = 0, jobs: int | None = None, quie
                 recognised.setdefault(f"{d:g}", {}).setdefault(method, {})[o] = sum(r["recognized"] == o
                                                                                  for r in rows)
             matrix.setdefault(f"{d:g}", {})[method] = cells
+            kinds = [_why_missed(r, method) for r in records if r["spacing"] == d
+                     and r["methods"][method]["recognized"] != r["object"]]
+            misses.setdefault(f"{d:g}", {})[method] = {k: kinds.count(k) for k in sorted(set(kinds))}
     table = {"benchmark": "paper-table5", "instances": instances, "seed": seed, "objects": list(OBJECTS),
              "config": CONFIG, "spacings": list(SPACINGS), "noise": {o: noise_for(o) for o in OBJECTS},
-             "paper": PAPER, "errors": matrix, "recognised": recognised, "records": records}
+             "paper": PAPER, "errors": matrix, "recognised": recognised, "misses": misses, "records": records}
     write_json(out / "paper-table5.json", table)
     table["text"] = _markdown(table)
     write_text_atomic(out / "paper-table5.md", table["text"])
@@ -121,5 +124,20 @@ def _markdown(table: dict) -> str:
         for method in METHODS:
             got = table["recognised"][key][method]
             lines.append(f"- {method}: {sum(got.values())} of {n * len(objects)} recognised ("
-                         + ", ".join(f"{o} {got[o]}/{n}" for o in objects) + "); the paper: 4 of 4.")
+                         + ", ".join(f"{o} {got[o]}/{n}" for o in objects) + "); the paper: 4 of 4."
+                         + "".join(f" Misses: {k} {v}." for k, v in table["misses"][key][method].items()))
     return "\n".join(lines) + "\n"
+
+
+def _why_missed(record: dict, method: str) -> str:
+    """Why a touch was missed: ``no_candidate`` (no model, or not the right one, had a candidate
+    within delta); ``within_noise`` (the winner fits the data within the noise of the right model's
+    fit: :func:`~tactrec.bench.common.within_noise`, one touch cannot decide); ``beyond_noise`` (the
+    winner fits better than the right model's registration by more than the noise: the right model's
+    search missed, or the winner fits better than the truth)."""
+    result = record["methods"][method]
+    own = result["errors"].get(record["object"])
+    winner = result["errors"].get(result["recognized"]) if result["recognized"] else None
+    if own is None or winner is None:
+        return "no_candidate"
+    return "within_noise" if within_noise(winner, own, points=record["points"], fit=own) else "beyond_noise"
