@@ -478,7 +478,7 @@ def test_bench_unknown_benchmark(tmp_path, capsys):
 
 def test_bench_sweep_options_belong_to_their_benchmarks(tmp_path, capsys):
     bad(capsys, ["bench", "kernels", "--scans", "paper-like", "--out", tmp_path / "bench"], "kernels",
-        "--scans applies to paper-fig11 and paper-table6 only")
+        "--scans applies to paper-fig11, paper-table6 and paper-steps only")
     bad(capsys, ["bench", "kernels", "--delta-only", "--out", tmp_path / "bench"], "kernels",
         "--delta-only applies to paper-fig11 only")
     bad(capsys, ["bench", "paper-table6", "--lengths", "9,24", "--out", tmp_path / "bench"], "paper-table6",

@@ -234,3 +234,26 @@ def test_bench_paper_table6_fills_the_matrix_and_counts_nc_cells(tmp_path):
         assert set(s["misses"]) <= {"estimate_failed", "no_candidate", "within_noise", "outfitted", "search_miss"}
     text = (tmp_path / "paper-table6.md").read_text()
     assert "| strawberry |" in text and "the paper (its own ten objects): 10 of 10" in text
+
+
+def test_bench_paper_steps_on_a_sphere_finds_every_step_sound(tmp_path):
+    """The step audit on a sphere of radius 30 mm (about 1 mm edges), where every step has a known
+    answer: the table's fit and the default estimate both give k1 = k2 = -1/30 /mm, so the gap is
+    within delta on every touch and a row lies near it; the data normal is the vertex normal to a
+    couple of degrees; eq. 15 at the touched vertex is small with either rotation scan."""
+    import trimesh
+
+    from tactrec.bench import paper_steps
+
+    path = tmp_path / "ball.ply"
+    trimesh.creation.icosphere(subdivisions=5, radius=30.0).export(path)
+    table = paper_steps.run(out=tmp_path, instances=5, models=(str(path),), scans="shipped", quiet=True)
+    for record in table["records"]:
+        k1, k2 = record["table_at_touch"]
+        assert abs(k1 + 1 / 30) < 0.003 and abs(k2 + 1 / 30) < 0.003
+    s = table["readings"]["default"]
+    assert s["touches"] == 5 and s["failed"] == 0
+    assert s["within_delta_percent"] == 100 and s["row_near_percent"] == 100
+    assert s["gap_median"] < 0.005 and s["tilt_p90_deg"] < 2.0
+    assert s["error_at_touch_phi10"]["p90"] < 0.05 and s["error_at_touch_phi1"]["p90"] < 0.05
+    assert "| default |" in (tmp_path / "paper-steps.md").read_text()

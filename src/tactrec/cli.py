@@ -193,8 +193,8 @@ def cmd_bench(args) -> int:
         raise InputError(f"unknown benchmark; available: {', '.join(sorted(BENCHMARKS))}", args.name)
     out = Path(args.out) if args.out else Path("bench-out")
     extra = {}
-    if args.scans is not None and args.name not in ("paper-fig11", "paper-table6"):
-        raise InputError("--scans applies to paper-fig11 and paper-table6 only", args.name)
+    if args.scans is not None and args.name not in ("paper-fig11", "paper-table6", "paper-steps"):
+        raise InputError("--scans applies to paper-fig11, paper-table6 and paper-steps only", args.name)
     for option, value in (("--delta-only", args.delta_only or None), ("--lengths", args.lengths),
                           ("--angles", args.angles)):
         if value is not None and args.name != "paper-fig11":
@@ -301,8 +301,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--method", choices=sorted(METHODS), default="paper",
                    help="method of the paper-* reproductions (default paper)")
     p.add_argument("--scans", choices=("shipped", "paper-like"), default=None,
-                   help="paper-fig11, paper-table6: the YCB scans as shipped (default), or scaled to 60-95 mm and "
-                        "Loop-subdivided to the paper's resolution")
+                   help="paper-fig11, paper-table6, paper-steps: the YCB scans as shipped (paper-steps: paper-like), "
+                        "or scaled to 60-95 mm and Loop-subdivided to the paper's resolution")
     p.add_argument("--delta-only", action="store_true",
                    help="paper-fig11: only the delta sweep (one recognition per touch), l and phi at the defaults")
     p.add_argument("--lengths", type=_positives, default=None, metavar="MM,...",

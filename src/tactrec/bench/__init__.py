@@ -10,7 +10,7 @@ from __future__ import annotations
 from typing import Callable
 
 from . import (baselines, cold_start, fast_vs_paper, fit_limit, kernels, paper_closedform, paper_example, paper_fig11,
-               paper_mesh, paper_table5, paper_table6, scale, search_limits)
+               paper_mesh, paper_steps, paper_table5, paper_table6, scale, search_limits)
 
 __all__ = ["BENCHMARKS"]
 
@@ -22,6 +22,7 @@ BENCHMARKS: dict[str, Callable[..., dict]] = {
     "paper-fig11": paper_fig11.run_fig11,
     "paper-table5": paper_table5.run,
     "paper-table6": paper_table6.run,
+    "paper-steps": paper_steps.run,
     "fast-vs-paper": fast_vs_paper.run,
     "scale": scale.run_scale,
     "scale-exhaustive": scale.run_exhaustive,

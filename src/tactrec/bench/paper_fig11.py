@@ -22,15 +22,15 @@ from pathlib import Path
 
 import numpy as np
 
-from ..database import build_entries
 from ..errors import InputError
 from ..estimation import estimate
 from ..registration import mesh_paper
 from ..simulation import simulate_touch, spread_vertices
-from ..surfaces import BUILTIN_SETS, load_model
-from .common import CORE_SOURCES, default_jobs, instance_rng, run_parallel, saved_record, sources_hash, write_json
+from ..surfaces import BUILTIN_SETS
+from .common import (CORE_SOURCES, SCANS, default_jobs, instance_rng, run_parallel, saved_record, scan_database,
+                     sources_hash, write_json)
 
-__all__ = ["run_fig11", "SWEEPS", "DEFAULTS"]
+__all__ = ["run_fig11", "SWEEPS", "DEFAULTS", "p3_touch"]
 
 SPACING = 0.3
 DEFAULTS = {"delta": 0.03, "length": 24.0, "angle": 60.0}
@@ -44,34 +44,23 @@ PAPER = {"delta": {"0.005": {"success": 37, "seconds": 4}, "0.03": {"success": 9
          "length": {"9": {"success": 63}, "24": {"success": 93}},
          "angle": {"10": {"success": 69}, "60": {"success": 93}}}
 
-#: the scans to run on: as shipped, or made like the paper's (:func:`tactrec.surfaces.paper_like.paper_like`)
-SCANS = ("shipped", "paper-like")
-
-_DB = {}
-
-
-def _database(models: tuple[str, ...], scans: str = "shipped"):
-    if (models, scans) not in _DB:
-        if scans == "paper-like":
-            from ..database import Database, _entry
-            from ..surfaces.paper_like import paper_like
-
-            _DB[models, scans] = Database([_entry(paper_like(load_model(m))) for m in models])
-        else:
-            _DB[models, scans] = build_entries(models)
-    return _DB[models, scans]
+def p3_touch(model, m_index: int, instance: int, *, seed: int, length: float, angle: float):
+    """Touch ``instance`` of P3 on ``model`` (the ``m_index``-th scan): ``(vertex, data)``, the
+    touched vertex (no two instances within 15 rings) and three curves through it, in a random
+    sensor frame."""
+    vertices = spread_vertices(model, instance + 1, rings=15, rng=instance_rng(seed, m_index))
+    vertex = int(vertices[min(instance, len(vertices) - 1)])
+    points = int(round(length / SPACING)) + 1
+    return vertex, simulate_touch(model, [vertex], points=points, spacing=SPACING, angle=angle,
+                                  rng=instance_rng(seed, m_index, instance))
 
 
 def _touch(task):
     """One touch: recognise it, keeping every candidate's walk, for all deltas <= ``delta``."""
     models, m_index, instance, seed, length, angle, deltas, scans = task
-    db = _database(models, scans)
+    db = scan_database(models, scans)
     entry = db.entries[m_index]
-    rng = instance_rng(seed, m_index, instance)
-    vertices = spread_vertices(entry.model, instance + 1, rings=15, rng=instance_rng(seed, m_index))
-    vertex = int(vertices[min(instance, len(vertices) - 1)])
-    points = int(round(length / SPACING)) + 1
-    touch = simulate_touch(entry.model, [vertex], points=points, spacing=SPACING, angle=angle, rng=rng)
+    vertex, touch = p3_touch(entry.model, m_index, instance, seed=seed, length=length, angle=angle)
     start = time.perf_counter()
     try:
         geom = estimate(touch)

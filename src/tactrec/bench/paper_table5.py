@@ -131,13 +131,15 @@ def _markdown(table: dict) -> str:
 
 def _why_missed(record: dict, method: str) -> str:
     """Why a touch was missed: ``no_candidate`` (no model, or not the right one, had a candidate
-    within delta); ``within_noise`` (the winner fits the data within the noise of the right model's
-    fit: :func:`~tactrec.bench.common.within_noise`, one touch cannot decide); ``beyond_noise`` (the
-    winner fits better than the right model's registration by more than the noise: the right model's
-    search missed, or the winner fits better than the truth)."""
+    within delta); ``within_noise`` (the winner and the right model fit the data within its noise of
+    each other, :func:`~tactrec.bench.common.within_noise`, the noise being the right model's best
+    fit, by ``fast``: one touch cannot decide); ``beyond_noise`` (the winner fits better than the right
+    model's registration by more than the noise: the right model's search missed, or the winner
+    fits better than the truth)."""
     result = record["methods"][method]
     own = result["errors"].get(record["object"])
     winner = result["errors"].get(result["recognized"]) if result["recognized"] else None
     if own is None or winner is None:
         return "no_candidate"
-    return "within_noise" if within_noise(winner, own, points=record["points"], fit=own) else "beyond_noise"
+    noise = min(own, record["methods"]["fast"]["errors"].get(record["object"]) or own)
+    return "within_noise" if within_noise(winner, own, points=record["points"], fit=noise) else "beyond_noise"

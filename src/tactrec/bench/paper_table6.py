@@ -151,10 +151,10 @@ def _markdown(table: dict) -> str:
 def _why_missed(record: dict, method: str) -> str:
     """Why a touch was missed: ``estimate_failed`` (the curves gave no estimate); ``no_candidate``
     (paper: the right model NC); ``within_noise`` (the winner and the truth itself, by the method's
-    own error, fit within the data's noise of each other: :func:`~tactrec.bench.common.within_noise`,
-    one touch cannot decide); ``outfitted`` (the winner fits better than the truth, beyond the noise:
-    no search would help); ``search_miss`` (the truth fits better, beyond the noise, but the search
-    did not find it)."""
+    own error, fit within the data's noise of each other: :func:`~tactrec.bench.common.within_noise`
+    with the noise of the true pose's exact fit, so one touch cannot decide); ``outfitted`` (the
+    winner fits better than the truth, beyond the noise: no search would help); ``search_miss`` (the
+    truth fits better, beyond the noise, but the search did not find it)."""
     if "failed" in record:
         return "estimate_failed"
     result = record["methods"][method]
@@ -165,7 +165,7 @@ def _why_missed(record: dict, method: str) -> str:
     truth = record["truth"][method]
     if winner is None or truth is None:
         return "search_miss"
-    if within_noise(winner, truth, points=record["points"], fit=truth):
+    if within_noise(winner, truth, points=record["points"], fit=record["truth"]["fast"]):
         return "within_noise"
     return "outfitted" if winner < truth else "search_miss"
 
