@@ -563,3 +563,15 @@ def test_failed_rebuild_keeps_the_database(db, data, tmp_path, capsys):
     bad(capsys, ["build", good, model, "--out", db, "--quiet"], model, "empty file")
     assert {p.name: p.read_bytes() for p in db.iterdir()} == before
     assert main(["recognize", str(data), "--db", str(db), "--quiet"]) == 0
+
+
+def test_bench_paper_option_is_checked_before_any_work(tmp_path, capsys):
+    bad(capsys, ["bench", "paper-fig11", "--paper-option", "parabola_points=1", "--out", tmp_path / "bench"],
+        "--method", "parabola_points must be a whole number >= 2")
+    bad(capsys, ["bench", "paper-fig11", "--paper-option", "no_such=3", "--out", tmp_path / "bench"],
+        "--method", "has no option 'no_such'")
+    bad(capsys, ["bench", "paper-fig11", "--paper-option", "phi_step", "--out", tmp_path / "bench"],
+        "--paper-option", "expected NAME=VALUE")
+    bad(capsys, ["bench", "kernels", "--paper-option", "phi_step=5", "--out", tmp_path / "bench"], "kernels",
+        "--paper-option applies to paper-fig11 only")
+    assert files_in(tmp_path) == []

@@ -257,3 +257,35 @@ def test_bench_paper_steps_on_a_sphere_finds_every_step_sound(tmp_path):
     assert s["gap_median"] < 0.005 and s["tilt_p90_deg"] < 2.0
     assert s["error_at_touch_phi10"]["p90"] < 0.05 and s["error_at_touch_phi1"]["p90"] < 0.05
     assert "| default |" in (tmp_path / "paper-steps.md").read_text()
+
+
+def test_paper_method_parabola_reading_estimates_a_sphere_and_reaches_the_benchmark(tmp_path):
+    """The ``parabola_points`` reading of Section 3.1.1: on a sphere of radius 25 the parabola over
+    3 points each side gives k1 = k2 = -1/25; in ``paper-fig11`` it is the estimate the lookup
+    uses (the record's estimate is that reading's, not the default's), and the touch is recognised."""
+    import trimesh
+
+    from tactrec.bench.paper_fig11 import p3_touch, run_fig11
+    from tactrec.estimation import estimate
+    from tactrec.methods.paper import PaperConfig
+    from tactrec.simulation import simulate_random_touch
+    from tactrec.surfaces import load_model
+    from tactrec.surfaces.mesh import MeshModel
+
+    config = PaperConfig(parabola_points=3)
+    rng = np.random.default_rng(3)
+    ball = trimesh.creation.icosphere(subdivisions=6, radius=25.0)
+    model = MeshModel(ball.vertices, ball.faces, name="ball", units="mm")
+    for _ in range(5):
+        data = simulate_random_touch(model, points=41, spacing=0.3, rng=rng)
+        g = config.geometry(data)
+        assert abs(g.k1 + 0.04) < 0.004 and abs(g.k2 + 0.04) < 0.004
+    table = run_fig11(out=tmp_path, instances=1, jobs=1, quiet=True, models=("apple",),
+                      sweeps={"delta": [0.03], "length": [24.0], "angle": [60.0]}, options={"parabola_points": 3})
+    record = table["records"][0]
+    _, data = p3_touch(load_model("apple"), 0, 0, seed=0, length=24.0, angle=60.0)
+    assert np.allclose(record["estimate"], [config.geometry(data).k1, config.geometry(data).k2])
+    assert not np.allclose(record["estimate"], [estimate(data).k1, estimate(data).k2])
+    assert record["results"]["0.03"]["correct"]
+    assert table["benchmark"] == "paper-fig11-parabola-points3"
+    assert (tmp_path / "paper-fig11-parabola-points3.json").exists()

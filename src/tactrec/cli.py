@@ -52,6 +52,21 @@ def _positives(text: str) -> list[float]:
     return [_positive(x) for x in text.split(",")]
 
 
+def _number_option(text: str) -> tuple[str, int | float]:
+    """``NAME=NUMBER`` (an argparse type): a whole number stays an int."""
+    name, sep, value = text.partition("=")
+    if not sep or not name.isidentifier():
+        raise argparse.ArgumentTypeError(f"expected NAME=VALUE, got {text!r}")
+    try:
+        return name, int(value)
+    except ValueError:
+        pass
+    try:
+        return name, float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {value!r}") from None
+
+
 def _nonnegative(text: str) -> float:
     try:
         value = float(text)
@@ -196,13 +211,15 @@ def cmd_bench(args) -> int:
     if args.scans is not None and args.name not in ("paper-fig11", "paper-table6", "paper-steps"):
         raise InputError("--scans applies to paper-fig11, paper-table6 and paper-steps only", args.name)
     for option, value in (("--delta-only", args.delta_only or None), ("--lengths", args.lengths),
-                          ("--angles", args.angles)):
+                          ("--angles", args.angles), ("--paper-option", args.paper_option)):
         if value is not None and args.name != "paper-fig11":
             raise InputError(f"{option} applies to paper-fig11 only", args.name)
     if args.delta_only and (args.lengths or args.angles):
         raise InputError("--delta-only leaves l and phi at the defaults; give it or --lengths/--angles", args.name)
     if args.scans is not None:
         extra["scans"] = args.scans
+    if args.paper_option:
+        extra["options"] = dict(args.paper_option)
     if args.delta_only or args.lengths or args.angles:
         from .bench.paper_fig11 import DEFAULTS, SWEEPS
 
@@ -309,6 +326,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="paper-fig11: the curve lengths l of the l sweep (default 9,12,15,18,21,24)")
     p.add_argument("--angles", type=_positives, default=None, metavar="DEG,...",
                    help="paper-fig11: the plane separations phi of the phi sweep (default 10,20,30,40,50,60)")
+    p.add_argument("--paper-option", type=_number_option, action="append", metavar="NAME=VALUE",
+                   help="paper-fig11: an option of the paper method, one of its readings of the paper "
+                        "(e.g. parabola_points=3, phi_step=5); repeatable")
     p.add_argument("--out", metavar="DIR", help="output folder (default bench-out)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_bench)

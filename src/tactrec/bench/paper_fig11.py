@@ -7,6 +7,9 @@ recognition by the paper's mesh method against all ten.  Three sweeps around
 the defaults ``delta = 0.03 /mm``, ``l = 24 mm``, ``phi = 60 deg``: ``delta``
 in 0.005..0.03, ``l`` in 9..24 mm, ``phi`` in 10..60 degrees.
 
+``options`` are the ``paper`` method's (:class:`tactrec.methods.paper.PaperConfig`):
+its readings of the paper, such as ``parabola_points`` and ``phi_step``.
+
 The greedy walk from one candidate does not depend on the other candidates,
 so one recognition at the largest ``delta`` gives every smaller ``delta``
 too: its candidates are a subset, its error the minimum over the subset's
@@ -24,6 +27,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..estimation import estimate
+from ..methods.paper import PaperConfig
 from ..registration import mesh_paper
 from ..simulation import simulate_touch, spread_vertices
 from ..surfaces import BUILTIN_SETS
@@ -57,13 +61,14 @@ def p3_touch(model, m_index: int, instance: int, *, seed: int, length: float, an
 
 def _touch(task):
     """One touch: recognise it, keeping every candidate's walk, for all deltas <= ``delta``."""
-    models, m_index, instance, seed, length, angle, deltas, scans = task
+    models, m_index, instance, seed, length, angle, deltas, scans, options = task
+    config = PaperConfig.from_options("paper", dict(options))
     db = scan_database(models, scans)
     entry = db.entries[m_index]
     vertex, touch = p3_touch(entry.model, m_index, instance, seed=seed, length=length, angle=angle)
     start = time.perf_counter()
     try:
-        geom = estimate(touch)
+        geom = config.geometry(touch) or estimate(touch)
     except InputError as exc:                  # counted as a failure, not the end of the run
         failed = {"recognized": None, "correct": False, "seconds": time.perf_counter() - start, "errors": {},
                   "candidates": {m: 0 for m in models}, "failed": str(exc)}
@@ -75,13 +80,12 @@ def _touch(task):
         table = other.table
         rows = table.candidates(geom.k1, geom.k2, max(deltas))
         t0 = time.perf_counter()
-        problem = mesh_paper.MeshSuperposition(other.model, geom, touch.curves, phi_step=10.0)
-        found = problem.walks(table.samples.sites[rows, 0].astype(np.int64),
-                              max_steps=mesh_paper.DEFAULTS["max_steps"])
+        problem = mesh_paper.MeshSuperposition(other.model, geom, touch.curves, phi_step=config.phi_step)
+        found = problem.walks(table.samples.sites[rows, 0].astype(np.int64), max_steps=config.max_steps)
         dk = np.hypot(table.samples.k1[rows] - geom.k1, table.samples.k2[rows] - geom.k2)
         walks[other.name] = (dk, found, time.perf_counter() - t0, max(problem.evaluated, 1))
     # why a touch fails: is there a candidate near the truth, and does eq. 15 prefer the truth?
-    true_problem = mesh_paper.MeshSuperposition(entry.model, geom, touch.curves, phi_step=10.0)
+    true_problem = mesh_paper.MeshSuperposition(entry.model, geom, touch.curves, phi_step=config.phi_step)
     dk, found, _, _ = walks[entry.name]
     sites = entry.table.samples.sites[entry.table.candidates(geom.k1, geom.k2, max(deltas)), 0].astype(np.int64)
     here = entry.model.vertices[vertex]
@@ -134,7 +138,7 @@ def _why_missed(record: dict, delta) -> str | None:
 
 
 def _task_key(task) -> str:
-    models, m_index, instance, seed, length, angle, deltas, scans = task
+    models, m_index, instance, seed, length, angle, deltas, scans, options = task
     return f"{models[m_index]}-{instance}-l{length:g}-phi{angle:g}"
 
 
@@ -146,8 +150,8 @@ def _code_hash() -> str:
 def _touch_saved(job):
     """Run one task, or reuse its record from an interrupted run of the same code and settings."""
     task, folder = job
-    models, _, _, seed, _, _, deltas, scans = task
-    settings = {"models": list(models), "seed": seed, "deltas": list(deltas), "scans": scans}
+    models, _, _, seed, _, _, deltas, scans, options = task
+    settings = {"models": list(models), "seed": seed, "deltas": list(deltas), "scans": scans, "options": dict(options)}
     saved = saved_record(folder / f"{_task_key(task)}.json", lambda: {"settings": settings, "record": _touch(task)},
                          accept=lambda s: s.get("settings") == settings)
     return saved["record"]
@@ -155,13 +159,17 @@ def _touch_saved(job):
 
 def run_fig11(*, out, instances: int = 10, seed: int = 0, jobs: int | None = None, quiet: bool = False,
               method: str = "paper", models: tuple[str, ...] | None = None, sweeps: dict | None = None,
-              scans: str = "shipped") -> dict:
+              scans: str = "shipped", options: dict | None = None) -> dict:
     """P3 / Fig. 11: success rate and time per recognition along the three sweeps, on the scans as
-    shipped or made like the paper's (``scans``, one of :data:`SCANS`)."""
+    shipped or made like the paper's (``scans``, one of :data:`SCANS`), by the ``paper`` method with
+    ``options`` (its readings; the output's name lists them)."""
     if scans not in SCANS:
         raise InputError(f"unknown scans {scans!r}; choose from {', '.join(SCANS)}")
+    options = tuple(sorted((k, v) for k, v in (options or {}).items() if v is not None))
+    PaperConfig.from_options("paper", dict(options))            # a bad option fails before any work
     out = Path(out)
     name = "paper-fig11" if scans == "shipped" else f"paper-fig11-{scans}"
+    name += "".join(f"-{k.replace('_', '-')}{v:g}" for k, v in options)
     models = tuple(models or BUILTIN_SETS["paper-fig11"])
     sweeps = sweeps or SWEEPS
     configs = {(DEFAULTS["length"], DEFAULTS["angle"]): sorted(set(sweeps["delta"]) | {DEFAULTS["delta"]})}
@@ -169,7 +177,7 @@ def run_fig11(*, out, instances: int = 10, seed: int = 0, jobs: int | None = Non
         configs.setdefault((length, DEFAULTS["angle"]), [DEFAULTS["delta"]])
     for angle in sweeps["angle"]:
         configs.setdefault((DEFAULTS["length"], angle), [DEFAULTS["delta"]])
-    tasks = [(models, m, i, seed, length, angle, deltas, scans) for (length, angle), deltas in configs.items()
+    tasks = [(models, m, i, seed, length, angle, deltas, scans, options) for (length, angle), deltas in configs.items()
              for m in range(len(models)) for i in range(instances)]
     # each touch's record is saved as it completes, so an interrupted run resumes where it stopped
     parts = Path(out) / f"{name}.parts" / _code_hash()
@@ -189,8 +197,8 @@ def run_fig11(*, out, instances: int = 10, seed: int = 0, jobs: int | None = Non
                 "median_seconds": float(np.median([r["seconds"] for r in rows])), "touches": len(rows),
                 "misses": misses}
 
-    table = {"benchmark": name, "scans": scans, "method": method, "instances": instances, "seed": seed,
-             "models": list(models), "spacing_mm": SPACING, "defaults": DEFAULTS, "paper": PAPER,
+    table = {"benchmark": name, "scans": scans, "method": method, "options": dict(options), "instances": instances,
+             "seed": seed, "models": list(models), "spacing_mm": SPACING, "defaults": DEFAULTS, "paper": PAPER,
              "delta": {str(d): summary(DEFAULTS["length"], DEFAULTS["angle"], d) for d in sweeps["delta"]},
              "length": {str(l): summary(l, DEFAULTS["angle"], DEFAULTS["delta"]) for l in sweeps["length"]},
              "angle": {str(a): summary(DEFAULTS["length"], a, DEFAULTS["delta"]) for a in sweeps["angle"]},
@@ -198,7 +206,8 @@ def run_fig11(*, out, instances: int = 10, seed: int = 0, jobs: int | None = Non
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / f"{name}.json", table)
     table["plots"] = [str(_plot(table, out, name))]
-    lines = [f"P3 / Fig. 11: {len(models)} YCB scans ({scans}), {instances} touches each per setting (seed {seed})"]
+    lines = [f"P3 / Fig. 11: {len(models)} YCB scans ({scans}), {instances} touches each per setting (seed {seed})"
+             + "".join(f", {k} = {v:g}" for k, v in options)]
     for key, unit in (("delta", "1/mm"), ("length", "mm"), ("angle", "deg")):
         lines.append(f"  {key} ({unit}): " + ", ".join(
             f"{k}: {v['success_percent']:.0f}% {v['median_seconds']:.1f}s" for k, v in table[key].items()))

@@ -6,12 +6,19 @@ model without a candidate is rejected, "NC"), then steepest descent on
 or the greedy walk over eq. 15's plane sections on a mesh
 (:mod:`tactrec.registration.mesh_paper`).  Without an ``outward`` hint both
 normals are tried and the better registration kept.
+
+The paper fits "a parabola to a few data points on the curve and around p"
+(Section 3.1.1) without saying how few: ``parabola_points`` reads it as the
+``N`` points each side of ``p``; by default the method takes the touch's
+estimate as every method gets it (:func:`tactrec.estimation.estimate`).
+``tactrec bench paper-steps`` measures the readings step by step.
 """
 
 from __future__ import annotations
 
 import dataclasses
 
+from ..estimation import estimate
 from ..registration import closedform_paper, mesh_paper
 from ..registration.result import Registration
 from .base import Config, SearchOutcome
@@ -31,6 +38,9 @@ class PaperConfig(Config):
         The initial-phi scan, its bisections and the steepest-descent steps (Section 4.2).
     phi_step, max_steps
         The rotation step in degrees and the greedy walk's longest run on a mesh (Section 5.3).
+    parabola_points : int or None
+        The estimate from the paper's parabola fitted to this many points each side of ``p``
+        (Section 3.1.1); None: the touch's own estimate.
     """
 
     delta: float | None = None
@@ -39,16 +49,29 @@ class PaperConfig(Config):
     max_iterations: int = closedform_paper.DEFAULTS["max_iterations"]
     phi_step: float = mesh_paper.DEFAULTS["phi_step"]
     max_steps: int = mesh_paper.DEFAULTS["max_steps"]
+    parabola_points: int | None = None
 
     def __post_init__(self):
         self._check("delta", self.delta is None or self.delta > 0, "positive")
         for name in ("phi_samples", "bisections", "max_iterations", "max_steps"):
             self._check(name, isinstance(getattr(self, name), int) and getattr(self, name) >= 1, "a whole number >= 1")
         self._check("phi_step", 0 < self.phi_step <= 180, "in (0, 180] degrees")
+        self._check("parabola_points", self.parabola_points is None
+                    or (isinstance(self.parabola_points, int) and self.parabola_points >= 2), "a whole number >= 2")
+
+    def geometry(self, data):
+        """The :class:`~tactrec.estimation.LocalGeometry` this reading gives for tactile ``data``
+        (None: the touch's own estimate)."""
+        if self.parabola_points is None:
+            return None
+        return estimate(data, window=self.parabola_points, degree=2)
 
 
 def _register(entry, touch, config: PaperConfig) -> Registration:
     model = entry.model
+    own = config.geometry(touch.data)
+    if own is not None:
+        touch = dataclasses.replace(touch, estimate=own)
     touch = in_model_units(touch, model)
     if model.kind == "mesh":
         def one(g):
