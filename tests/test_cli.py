@@ -289,3 +289,11 @@ def test_paper_method_parabola_reading_estimates_a_sphere_and_reaches_the_benchm
     assert record["results"]["0.03"]["correct"]
     assert table["benchmark"] == "paper-fig11-parabola-points3"
     assert (tmp_path / "paper-fig11-parabola-points3.json").exists()
+    # the recognition itself takes the reading: a different estimate, the same right model
+    from tactrec.bench.common import scan_database
+    from tactrec.recognition import recognize
+
+    entries = scan_database(("apple", "banana")).entries
+    default, reading = (recognize(data, entries, method="paper", **o) for o in ({}, {"parabola_points": 3}))
+    assert default.best == reading.best == "apple"
+    assert default.ranking[0].error != reading.ranking[0].error

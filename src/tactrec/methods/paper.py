@@ -69,9 +69,6 @@ class PaperConfig(Config):
 
 def _register(entry, touch, config: PaperConfig) -> Registration:
     model = entry.model
-    own = config.geometry(touch.data)
-    if own is not None:
-        touch = dataclasses.replace(touch, estimate=own)
     touch = in_model_units(touch, model)
     if model.kind == "mesh":
         def one(g):
@@ -103,4 +100,7 @@ class PaperMethod:
         """Nothing beyond the lookup table, which the database holds."""
 
     def search(self, touch, models, config: PaperConfig, runner) -> SearchOutcome:
+        own = config.geometry(touch.data)          # this reading's estimate, once for every model
+        if own is not None:
+            touch = dataclasses.replace(touch, estimate=own)
         return SearchOutcome(runner.map(_stage, range(len(models)), touch, config))
