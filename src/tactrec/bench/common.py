@@ -41,8 +41,8 @@ SCANS = ("shipped", "paper-like")
 
 @functools.lru_cache(maxsize=2)
 def scan_database(models: tuple[str, ...], scans: str = "shipped"):
-    """The built-in ``models`` with their tables, as shipped or made like the paper's (``scans``, one of
-    :data:`SCANS`), kept for the rest of this process."""
+    """The built-in ``models`` with their tables, as shipped or (meshes) made like the paper's
+    (``scans``, one of :data:`SCANS`), kept for the rest of this process."""
     from ..database import Database, _entry, build_entries
     from ..errors import InputError
     from ..surfaces import load_model

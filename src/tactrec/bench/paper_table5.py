@@ -23,16 +23,15 @@ instances, a cell is the median over the touches.
 
 from __future__ import annotations
 
-import functools
 from pathlib import Path
 
 import numpy as np
 
-from ..database import build_entries
 from ..io.atomic import write_text_atomic
 from ..simulation import simulate_random_touch
 from ..surfaces import BUILTIN_SETS
-from .common import error_cell, errors_on_every_model, instance_rng, run_parallel, within_noise, write_json
+from .common import (error_cell, errors_on_every_model, instance_rng, run_parallel, scan_database, within_noise,
+                     write_json)
 
 __all__ = ["run", "PAPER", "CONFIG"]
 
@@ -56,14 +55,9 @@ def noise_for(name: str) -> float:
     return PAPER[name][name] * np.sqrt(np.pi / 2)
 
 
-@functools.lru_cache(maxsize=1)
-def _database():
-    return build_entries(OBJECTS)
-
-
 def _touch(task) -> dict:
     o_index, instance, seed, spacing = task
-    db = _database()
+    db = scan_database(tuple(OBJECTS))
     entry = db.entries[o_index]
     data = simulate_random_touch(entry.model, rng=instance_rng(seed, o_index, instance),
                                  noise=noise_for(entry.name), spacing=spacing, **CONFIG)
@@ -102,7 +96,6 @@ def run(*, out, instances: int = 1, seed: int = 0, jobs: int | None = None, quie
     table["text"] = _markdown(table)
     write_text_atomic(out / "paper-table5.md", table["text"])
     return table
-
 
 
 def _markdown(table: dict) -> str:
