@@ -126,17 +126,24 @@ def cmd_recognize(args) -> int:
 
     if (args.db is None) == (not args.models):
         raise InputError("give either --db DB or --models MODEL...", "tactrec recognize")
+    from .cli_session import format_session, recognize_session
+    from .io.session import is_session_file, load_session
+
     get_method(args.method).configure(**_recognition_options(args))    # a bad option before any work
-    touches = [load_touch(path) for path in args.data]          # validate everything first
+    # validate everything first; a session file is recognised as one object, one pose
+    inputs = [load_session(path) if is_session_file(path) else load_touch(path) for path in args.data]
     db = open_models(db=args.db, models=args.models, warn=_warn, quiet=args.quiet, units=args.units,
                      scale=args.scale)
     workers = default_workers() if len(db) > 4 else 1
     with Recognizer(db, method=args.method, workers=workers, **_recognition_options(args)) as recognizer:
-        results = [recognizer.recognize(t) for t in touches]
+        results = [recognize_session(recognizer, x).result if isinstance(x, list) else recognizer.recognize(x)
+                   for x in inputs]
     out_lines = []
-    for path, result in zip(args.data, results):
+    for path, x, result in zip(args.data, inputs, results):
         if args.json:
             out_lines.append(json.dumps(dict({"file": str(path)}, **result.to_json())))
+        elif isinstance(x, list):
+            out_lines.append(format_session(str(path), result))
         else:
             out_lines.append(_format_result(str(path), result))
     sys.stdout.write("\n".join(out_lines) + "\n")
@@ -145,7 +152,8 @@ def cmd_recognize(args) -> int:
 
 def _format_result(name: str, result) -> str:
     est = result.estimate
-    flag = ", ambiguous: the runner-up fits within the noise" if result.ambiguous else ""
+    flag = f", confidence {result.confidence:.3f}" if result.best else ""
+    flag += ", ambiguous" if result.ambiguous else ""
     if not result.settled:
         flag += ", unsettled: the search's budget ran out before a fit within the noise"
     lines = [f"{name}: {'best ' + result.best if result.best else 'no model matches'}"
@@ -235,6 +243,15 @@ def cmd_bench(args) -> int:
     return 0
 
 
+def cmd_next(args) -> int:
+    from .cli_session import cmd_next as run
+    from .database import open_models
+
+    if (args.db is None) == (not args.models):
+        raise InputError("give either --db DB or --models MODEL...", "tactrec next")
+    return run(args, open_models=open_models, options={}, warn=_warn)
+
+
 def cmd_demo(args) -> int:
     from .demo import run_demo
 
@@ -275,7 +292,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_build)
 
     p = sub.add_parser("recognize", help="recognise touches against a database")
-    p.add_argument("data", nargs="+", metavar="DATA", help="tactile data files (.json or .csv)")
+    p.add_argument("data", nargs="+", metavar="DATA", help="tactile data files (.json or .csv) or session files "
+                   "(.json with 'touches': one object, one pose)")
     p.add_argument("--db", metavar="DB", help="database built by 'tactrec build'")
     p.add_argument("--models", nargs="+", metavar="MODEL", help="model files or built-in names, instead of --db")
     p.add_argument("--json", action="store_true", help="one JSON object per data file, one per line")
@@ -288,6 +306,12 @@ def build_parser() -> argparse.ArgumentParser:
     _mesh_options(p)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_recognize)
+
+    from .cli_session import add_next_parser
+
+    add_next_parser(sub, positive=_positive, mesh_options=_mesh_options, methods=METHODS,
+                    default_method=DEFAULT_METHOD)
+    sub.choices["next"].set_defaults(func=cmd_next)
 
     p = sub.add_parser("simulate", help="generate tactile data on a model")
     p.add_argument("model", metavar="MODEL", help="model file or built-in name")

@@ -40,12 +40,17 @@ class Touch:
         Factor from data units to the units of this copy (1 for the data's own).
     noise : float
         The data's noise sigma per coordinate (third differences, median over the curves), data units.
+    context : tuple of (n_i, 3) arrays
+        Curves of other touches of the same object in the same frame (data units): a pose is
+        scored on them too (:attr:`joint_points`), while the local geometry, the places and the
+        noise come from this touch alone.
     """
 
     data: TactileData
     estimate: LocalGeometry
     scale: float = 1.0
     noise: float = 0.0
+    context: tuple = ()
 
     @classmethod
     def from_data(cls, data: TactileData, *, window: int | str | None = "auto", degree: int = 3,
@@ -63,6 +68,30 @@ class Touch:
     def points(self) -> np.ndarray:
         """All points ``(m, 3)``, in this copy's units."""
         return np.concatenate(self.curves)
+
+    @cached_property
+    def joint_curves(self) -> tuple[np.ndarray, ...]:
+        """This touch's curves and then the context's, this copy's units."""
+        return self.curves + tuple(np.asarray(c, dtype=np.float64) * self.scale for c in self.context)
+
+    @cached_property
+    def joint_points(self) -> np.ndarray:
+        """All points of :attr:`joint_curves` ``(m, 3)``: what a pose is scored on."""
+        return np.concatenate(self.joint_curves)
+
+    @cached_property
+    def joint_reach(self) -> float:
+        """The largest distance of a joint point from their centroid, this copy's units."""
+        x = self.joint_points
+        return float(np.max(np.linalg.norm(x - x.mean(axis=0), axis=1)))
+
+    def joint_subset(self, per_curve: int) -> np.ndarray:
+        """:func:`subset` of the joint curves."""
+        return subset(self.joint_curves, per_curve)
+
+    def with_context(self, curves) -> "Touch":
+        """The same touch, its poses scored also on ``curves`` (other touches, same frame, data units)."""
+        return dataclasses.replace(self, context=tuple(np.asarray(c, dtype=np.float64) for c in curves))
 
     @cached_property
     def geometry(self) -> LocalGeometry:
@@ -98,7 +127,7 @@ class Touch:
         """A digest of the points, the estimate and the scale: names this touch in caches."""
         import hashlib
 
-        h = hashlib.sha1(np.ascontiguousarray(self.points).tobytes())
+        h = hashlib.sha1(np.ascontiguousarray(self.joint_points).tobytes())
         h.update(np.ascontiguousarray(self.geometry.normal).tobytes())
         h.update(np.float64(self.scale).tobytes())
         return h.hexdigest()
@@ -116,4 +145,4 @@ class Touch:
         """The same touch with coordinates multiplied by ``scale`` (data to model units)."""
         if scale == self.scale:
             return self
-        return Touch(self.data, self.estimate, float(scale), self.noise)
+        return Touch(self.data, self.estimate, float(scale), self.noise, self.context)

@@ -12,6 +12,7 @@ in this process.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import multiprocessing
 import os
 import time
@@ -25,6 +26,7 @@ from .estimation import LocalGeometry
 from .features import Touch
 from .io.touch import TactileData
 from .methods import DEFAULT_METHOD, get_method
+from .probability import AMBIGUOUS, Evidence, evidence, residuals
 from .registration.result import Registration
 from .tables import CurvatureTable
 
@@ -58,11 +60,9 @@ class Recognition:
     seconds : float
         Wall time of the recognition.
     method : str
-    margin : float
-        How much better than the runner-up the best model must fit to be told apart from it,
-        data units: ``max(2 sigma / sqrt(m), 0.1 E1)``, ``sigma`` the data's noise (per
-        coordinate, from third differences along the curves), ``m`` the number of data
-        points, ``E1`` the best error.
+    evidence : Evidence or None
+        What the probabilities come from (:mod:`tactrec.probability`): each data point's distance
+        to each accepted model under its pose.
     settled : bool
         False when the method's search ended on its budget rather than by its own rule.
     work : int
@@ -76,24 +76,40 @@ class Recognition:
     estimate: LocalGeometry
     seconds: float
     method: str
-    margin: float = 0.0
+    evidence: Evidence | None = None
     settled: bool = True
     work: int = 0
     depth: int = 1
 
+    @functools.cached_property
+    def probabilities(self) -> dict[str, float]:
+        """Each accepted model's probability that the data came from it (sum 1; see
+        :mod:`tactrec.probability`)."""
+        if self.evidence is None:
+            return {}
+        return dict(zip(self.evidence.models, self.evidence.probabilities().tolist()))
+
+    @property
+    def confidence(self) -> float:
+        """The best model's probability (0 when every model was rejected)."""
+        return float(self.probabilities.get(self.best, 0.0)) if self.best is not None else 0.0
+
     @property
     def ambiguous(self) -> bool:
-        """True when the data do not decide the answer: the runner-up's error is within
-        :attr:`margin` of the best's (the touch fits both models about equally well), or the
-        search ended on its budget (:attr:`settled` false), or the data leave the contact free
-        on the best model (its ``spread`` exceeds :data:`LOCATED` x its error: a direction the
-        data do not constrain, along a cylinder or over a flat patch)."""
-        ok = [r for r in self.ranking if r.ok]
-        if not ok:
+        """True when the data do not decide the model: :attr:`confidence` below
+        :data:`~tactrec.probability.AMBIGUOUS`, or the search ended on its budget (:attr:`settled`
+        false).  False when every model was rejected."""
+        if self.best is None:
             return False
-        if not self.settled or ok[0].spread > LOCATED * ok[0].error:
-            return True
-        return len(ok) > 1 and bool(ok[1].error / ok[1].scale - ok[0].error / ok[0].scale <= self.margin)
+        return bool(self.confidence < AMBIGUOUS or not self.settled)
+
+    @property
+    def located(self) -> bool:
+        """False when the data leave the contact free on the best model (its ``spread`` exceeds
+        :data:`LOCATED` x its error: a direction the data do not constrain, along a cylinder or
+        over a flat patch)."""
+        r = self.registration
+        return r is None or not r.spread > LOCATED * r.error
 
     @property
     def registration(self) -> Registration | None:
@@ -103,13 +119,15 @@ class Recognition:
         """The result of INTERFACE.md (``tactrec recognize --json``)."""
         return {
             "best": self.best,
-            "ranking": [r.to_json() for r in self.ranking],
+            "ranking": [dict(r.to_json(), probability=self.probabilities[r.model]) if r.ok else r.to_json()
+                        for r in self.ranking],
             "contact": self.estimate.contact.tolist(),
             "normal": (self.estimate.normal * (self.registration.normal_sign if self.registration else 1)).tolist(),
             "curvatures": [self.estimate.k1, self.estimate.k2],
             "method": self.method,
+            "confidence": self.confidence,
             "ambiguous": self.ambiguous,
-            "margin": self.margin,
+            "located": self.located,
             "settled": self.settled,
             "seconds": round(self.seconds, 4),
         }
@@ -222,6 +240,7 @@ class Recognizer:
         self.method = get_method(method)
         self.config = self.method.configure(**options)
         self.models = list(models)
+        self._by_name = {entry.name: entry for entry in self.models}
         self.estimation = dict(window=window, degree=degree, curvature_method=curvature_method)
         for entry in self.models:
             self.method.prepare(entry.model)
@@ -245,17 +264,34 @@ class Recognizer:
         if isinstance(self.runner, _Pool):
             self.runner.close()
 
-    def recognize(self, data: TactileData) -> Recognition:
-        """Recognise one touch (Section 3.3)."""
+    def session(self):
+        """A new :class:`~tactrec.session.Session` of touches of one object, recognised with these
+        models (nothing is rebuilt between touches)."""
+        from .session import Session
+
+        return Session(self)
+
+    def recognize(self, data: TactileData, *, context=()) -> Recognition:
+        """Recognise one touch (Section 3.3).  ``context``: curves of other touches of the same object
+        in the same frame, which the poses must fit too (a method that searches from this touch's
+        local geometry scores its poses on them; see :class:`~tactrec.features.Touch`)."""
         start = time.perf_counter()
         touch = Touch.from_data(data, **self.estimation)
+        if len(context):
+            touch = touch.with_context(context)
         outcome = self.method.search(touch, self.models, self.config, self.runner)
         ranking = sorted(outcome.ranking, key=_rank_key)
         best = ranking[0].model if ranking and ranking[0].ok else None
-        e1 = ranking[0].error / ranking[0].scale if best is not None else 0.0
-        margin = float(max(2.0 * touch.noise / np.sqrt(len(touch.points)), 0.1 * e1))
-        return Recognition(best, ranking, touch.estimate, time.perf_counter() - start, self.method.name, margin,
+        ok = [r for r in ranking if r.ok]
+        found = evidence([r.model for r in ok], [self._residuals(r, touch) for r in ok],
+                         [len(c) for c in touch.joint_curves], touch.noise)
+        return Recognition(best, ranking, touch.estimate, time.perf_counter() - start, self.method.name, found,
                            outcome.settled, outcome.work, outcome.depth)
+
+    def _residuals(self, r: Registration, touch: Touch) -> np.ndarray:
+        """The data's signed distances (data units) to the model of ``r`` under its pose."""
+        return residuals(self._by_name[r.model].model, r.rotation, r.translation, touch.joint_points, r.scale)
+
 
 
 def recognize(data: TactileData, models: Iterable[ModelEntry], *, method: str = DEFAULT_METHOD, workers: int = 1,

@@ -10,13 +10,16 @@ and the data-to-model pose) is kept in ``data.meta["truth"]``.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from .io.touch import TactileData
 from .surfaces.base import SurfaceModel
 
-__all__ = ["simulate_touch", "simulate_random_touch", "random_rigid_motion", "spread_vertices"]
+__all__ = ["simulate_touch", "simulate_random_touch", "random_rigid_motion", "spread_vertices", "sensor_to_world",
+           "simulate_world_touch"]
 
 
 def random_rigid_motion(rng, *, extent: float) -> tuple[np.ndarray, np.ndarray]:
@@ -136,3 +139,40 @@ def spread_vertices(model, count: int, *, rings: int = 15, rng=None) -> np.ndarr
         chosen.append(int(v))
         blocked[model.ring(int(v), rings)] = True
     return np.array(chosen, dtype=np.int64)
+
+
+def sensor_to_world(data: TactileData, model2world) -> tuple[np.ndarray, np.ndarray]:
+    """The ``sensor2world`` pose of a simulated touch (its ``meta["truth"]`` data-to-model pose)
+    when the object sits in the world at ``model2world = (R, t)`` (``world = R @ model + t``)."""
+    truth = data.meta["truth"]
+    Rd, td = np.asarray(truth["rotation"], dtype=np.float64), np.asarray(truth["translation"], dtype=np.float64)
+    Rw, tw = (np.asarray(a, dtype=np.float64) for a in model2world)
+    return Rw @ Rd, Rw @ td + tw
+
+
+def simulate_world_touch(model: SurfaceModel, world2model, contact, directions, *, points: int, spacing: float,
+                         noise: float = 0.0, noise_kind: str = "gaussian", outward: bool = True,
+                         sensor_frame: bool = True, rng=None):
+    """A touch of ``model`` placed in a world by ``world2model = (R, t, scale)`` (``model = scale R
+    world + t``): at the surface point nearest the world point ``contact``, the curves along the
+    world ``directions (2+, 3)`` (the first gives the first curve, the second the turn to the
+    next), ``spacing`` in world units.  Returns the data and its ``sensor2world`` pose (the data in
+    a random sensor frame, or in the world with the identity pose when ``sensor_frame`` is false).
+    Raises ``ValueError`` where a curve leaves the surface."""
+    R, t, s = np.asarray(world2model[0], dtype=np.float64), np.asarray(world2model[1], dtype=np.float64), \
+        float(world2model[2])
+    site = model.locate(s * (np.asarray(contact, dtype=np.float64) @ R.T) + t)
+    frame = model.site_frame(site)
+    u, v = np.asarray(directions, dtype=np.float64)[:2] @ R.T                          # model frame
+    first = float(np.arctan2(u @ frame.d2, u @ frame.d1))
+    angle = float(np.degrees((np.arctan2(v @ frame.d2, v @ frame.d1) - first) % (2 * np.pi)))
+    rng = np.random.default_rng(rng)
+    data = simulate_touch(model, site, points=points, spacing=spacing * s, angle=angle, first_direction=first,
+                          noise=noise * s, noise_kind=noise_kind, outward=outward, sensor_frame=sensor_frame, rng=rng)
+    truth = data.meta["truth"]
+    Rd, td = np.asarray(truth["rotation"]), np.asarray(truth["translation"])          # data -> model
+    # world = R^T (model - t) / s = R^T (Rd data + td - t) / s
+    R_sw = R.T @ Rd
+    t_sw = R.T @ (td - t) / s
+    world = data.transformed(np.eye(3), np.zeros(3), scale=1.0 / s)
+    return dataclasses.replace(world, meta=data.meta, source=data.source), (R_sw, t_sw)

@@ -9,8 +9,8 @@ from __future__ import annotations
 
 from typing import Callable
 
-from . import (baselines, cold_start, fast_vs_paper, fit_limit, kernels, paper_closedform, paper_example, paper_fig11,
-               paper_mesh, paper_steps, paper_table5, paper_table6, scale, search_limits)
+from . import (baselines, calibration, cold_start, fast_vs_paper, fit_limit, kernels, multi_touch, paper_closedform,
+               paper_example, paper_fig11, paper_mesh, paper_steps, paper_table5, paper_table6, scale, search_limits)
 
 __all__ = ["BENCHMARKS"]
 
@@ -31,4 +31,6 @@ BENCHMARKS: dict[str, Callable[..., dict]] = {
     "kernels": kernels.run,
     "cold-start": cold_start.run,
     "search-limits": search_limits.run,
+    "calibration": calibration.run,
+    "multi-touch": multi_touch.run,
 }

@@ -152,10 +152,10 @@ def _cheap(held, indices, touch, config: FastConfig, k: int) -> list[dict]:
     for index in indices:
         model = held.entries[index].model
         t = in_model_units(touch, model)
-        if t.radius > model.size:
+        if t.radius > model.size or t.joint_reach > model.size:
             out.append({"rejected": "the touch is larger than the model", "queries": 0})
             continue
-        x = t.subset(config.coarse_points)
+        x = t.joint_subset(config.coarse_points)
         poses, queries, tried = [], 0, 0
         for sign, g in zip((1, -1), t.orientations):
             chosen, fit = _places(held, index, t, sign, config, tier.places is None)
@@ -190,7 +190,7 @@ def _cheap(held, indices, touch, config: FastConfig, k: int) -> list[dict]:
 def _registration(model, touch, R: np.ndarray, t: np.ndarray, error: float, sign: int) -> Registration:
     """The registration of pose ``R (3, 3), t (3,)`` on a mesh, with the normal of sign ``sign``."""
     return mesh_fast.registration(model, touch.oriented(sign), R, t, error, candidates=0, sign=sign, scale=touch.scale,
-                                  x=touch.points)
+                                  x=touch.joint_points)
 
 
 def _refined(held, indices, touch, config: FastConfig, chosen: list[dict]) -> list[dict]:
@@ -199,13 +199,15 @@ def _refined(held, indices, touch, config: FastConfig, chosen: list[dict]) -> li
     for index, poses in zip(indices, chosen):
         model = held.entries[index].model
         t = in_model_units(touch, model)
-        R, tr, error, q1 = mesh_fast.refine(model, poses["R"], poses["t"], t.subset(3 * config.coarse_points),
+        R, tr, error, q1 = mesh_fast.refine(model, poses["R"], poses["t"], t.joint_subset(3 * config.coarse_points),
                                            iterations=config.iterations, tolerance=config.tolerance)
-        b = stable_order(error)[0]
-        R, tr, error, q2 = mesh_fast.refine(model, R[b:b + 1], tr[b:b + 1], t.points, iterations=2,
+        order = stable_order(error)
+        b = order[0]
+        others = np.concatenate([R[order], tr[order][:, :, None]], axis=2)                 # (k, 3, 4), best first
+        R, tr, error, q2 = mesh_fast.refine(model, R[b:b + 1], tr[b:b + 1], t.joint_points, iterations=2,
                                            tolerance=config.tolerance)
-        out.append({"registration": _registration(model, t, R[0], tr[0], error[0], int(poses["sign"][b])),
-                    "queries": q1 + q2})
+        found = _registration(model, t, R[0], tr[0], error[0], int(poses["sign"][b]))
+        out.append({"registration": dataclasses.replace(found, alternatives=others), "queries": q1 + q2})
     return out
 
 
@@ -216,13 +218,15 @@ def _polished(held, indices, touch, config: FastConfig, registrations: list[Regi
         model = held.entries[index].model
         t = in_model_units(touch, model)
         if model.kind == "mesh":
-            R, tr, error, q = mesh_fast.refine(model, r.rotation[None], r.translation[None], t.points,
+            R, tr, error, q = mesh_fast.refine(model, r.rotation[None], r.translation[None], t.joint_points,
                                                iterations=config.polish_iterations, tolerance=config.tolerance)
-            better = _registration(model, t, R[0], tr[0], error[0], r.normal_sign) if error[0] < r.error else r
+            better = dataclasses.replace(_registration(model, t, R[0], tr[0], error[0], r.normal_sign),
+                                         alternatives=r.alternatives) if error[0] < r.error else r
         else:
-            better = dataclasses.replace(closedform_fast.polish(model, r, t.oriented(r.normal_sign), t.points),
+            better = dataclasses.replace(closedform_fast.polish(model, r, t.oriented(r.normal_sign),
+                                                                t.joint_points),
                                          normal_sign=r.normal_sign, scale=r.scale)
-            q = config.polish_iterations * len(t.points)
+            q = config.polish_iterations * len(t.joint_points)
         out.append({"registration": better, "queries": q})
     return out
 
@@ -233,10 +237,10 @@ def _closed_form(held, indices, touch, config: FastConfig) -> list[dict]:
     for index in indices:
         entry = held.entries[index]
         t = in_model_units(touch, entry.model)
-        r = best_of_orientations(lambda g: closedform_fast.register(entry.model, entry.table, g, t.points,
+        r = best_of_orientations(lambda g: closedform_fast.register(entry.model, entry.table, g, t.joint_points,
                                                                     candidates=config.candidates), t,
                                  entry.model.name)
-        out.append({"registration": r, "queries": config.candidates * 12 * len(t.points)})
+        out.append({"registration": r, "queries": config.candidates * 12 * len(t.joint_points)})
     return out
 
 

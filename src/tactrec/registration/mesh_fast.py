@@ -32,8 +32,8 @@ from ..surfaces.mesh import MeshModel
 from ..surfaces.mesh_curvature import fitted_frame, quadric_curvatures, tangents
 from .result import Registration, cross, local_frame, point_to_plane_step, rotations_from_vectors, rotations_z
 
-__all__ = ["places", "frame_poses", "refine", "mean_distance", "registration", "data_curvatures", "prepare",
-           "starting_poses"]
+__all__ = ["places", "frame_poses", "refine", "signed_distances", "mean_distance", "registration", "data_curvatures",
+           "prepare", "starting_poses"]
 
 
 def prepare(model: MeshModel) -> None:
@@ -64,6 +64,12 @@ def _planes(model: MeshModel, moved: np.ndarray):
     tiny = 1e-12 * max(model.size, 1e-300)
     n = np.where((d > tiny)[:, None], diff * (side / np.maximum(d, tiny))[:, None], fn)
     return (side * d).reshape(moved.shape[:-1]), n.reshape(moved.shape)
+
+
+def signed_distances(model: MeshModel, points: np.ndarray) -> np.ndarray:
+    """Signed distances of ``points (..., 3)`` to the mesh, positive on the side of the closest
+    face's normal (:func:`_planes`)."""
+    return _planes(model, np.asarray(points, dtype=np.float64))[0]
 
 
 def refine(model: MeshModel, R: np.ndarray, t: np.ndarray, x: np.ndarray, *, iterations: int,

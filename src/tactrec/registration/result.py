@@ -47,6 +47,9 @@ class Registration:
         For a model the search pruned (its poses came nowhere near the best
         error so far on other models): the best score its cheap stage reached,
         model units; ``inf`` otherwise.
+    alternatives : (k, 3, 4) float or None
+        Other poses the search refined on this model (``[R | t]`` each, same convention), best
+        first: where a session looks for one pose that fits several touches.
     """
 
     model: str
@@ -62,6 +65,7 @@ class Registration:
     rejected: str | None = None
     cheap: float = float("inf")
     spread: float = 0.0
+    alternatives: np.ndarray | None = None
 
     @classmethod
     def rejection(cls, model: str, reason: str, *, scale: float = 1.0, cheap: float = float("inf")) -> "Registration":

@@ -1,0 +1,262 @@
+"""Several touches of one object: random next touches against ``next``'s (``tactrec bench multi-touch``).
+
+Each session places one scan in a random world pose (seeded) and touches it
+up to :data:`TOUCHES` times; every touch is simulated on the true object in
+a random sensor frame and added with its ``sensor2world`` pose, the models
+never seeing the world-to-object pose.  The first touch is the protocol's;
+after it two sessions go on from the same first touch:
+
+``random``
+    a random place on the true object within ``radius`` of an earlier
+    contact (random directions, the protocol's angle);
+``next``
+    the place and directions :meth:`tactrec.session.Session.next` proposes,
+    simulated on the true object there.
+
+A ``next`` session stops when nothing is left to separate (one hypothesis
+holds 99% of the probability); its later counts keep its last answer.  Sets:
+
+``hard-10``
+    ``fast-vs-paper``'s hard touches on the ten ``paper-fig11`` scans: contact
+    anywhere on a face, 12 mm curves 30 degrees apart, Gaussian noise 0.05 mm,
+    no outward side; ``instances`` sessions per scan.
+``p3-78``
+    P3 touches (contact at a vertex for the first, 24 mm curves 60 degrees
+    apart, no noise, outward side known) on all 78 YCB scans against all 78;
+    ``ceil(instances / 10)`` sessions per scan.
+
+Reported per set and strategy, after 1 to 5 touches: accuracy, mean
+confidence, ECE; the touches a session takes to reach confidence 0.99 (or 5);
+and the cost of adding a touch against one touch's recognition (the first
+touch, same run): medians, p95 and max of seconds and of their ratio.
+Plots: accuracy against touches, and the reliability of the confidence.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..io.atomic import write_text_atomic
+from ..simulation import random_rigid_motion, sensor_to_world, simulate_world_touch
+from ..surfaces import BUILTIN_SETS
+from .calibration import expected_calibration_error
+from .common import CORE_SOURCES, instance_rng, recognizer, run_parallel, saved_record, sources_hash, write_json
+
+__all__ = ["run", "SETS", "TOUCHES", "STRATEGIES"]
+
+SETS = ("hard-10", "p3-78")
+STRATEGIES = ("random", "next")
+TOUCHES = 5
+#: world units (mm): how far from an earlier contact a next touch may be
+RADIUS = 40.0
+SPECS = {"hard-10": {"length": 12.0, "angle": 30.0, "noise": 0.05, "outward": False},
+         "p3-78": {"length": 24.0, "angle": 60.0, "noise": 0.0, "outward": True}}
+SPACING = 0.3
+
+
+def _code_hash() -> str:
+    return sources_hash(*CORE_SOURCES, "session.py", "proposal.py", "probability.py", "bench/multi_touch.py",
+                        "bench/fast_vs_paper.py", "bench/scale.py")
+
+
+def _first(kind: str, m_index: int, instance: int, seed: int):
+    """The set's database, the touched entry and the protocol's first touch."""
+    if kind == "hard-10":
+        from .fast_vs_paper import _database, _simulate
+
+        db = _database(tuple(BUILTIN_SETS["paper-fig11"]))
+        entry = db.entries[m_index]
+        return db, entry, _simulate(entry, m_index, instance, seed, "hard")[1]
+    from . import scale
+
+    db = scale._database()
+    entry = db.entries[m_index]
+    return db, entry, scale._touch(entry, m_index, instance, seed)[1]
+
+
+def _next_touch(strategy, session, entry, world2model, spec, rng):
+    """The next touch's data and ``sensor2world`` pose, or None (nothing to propose / no place)."""
+    points = int(round(spec["length"] / SPACING)) + 1
+    if strategy == "next":
+        proposal = session.next(radius=RADIUS, angle=spec["angle"], rng=rng)
+        if proposal.contact is None:
+            return None
+        places = [(proposal.contact, proposal.directions)]
+    else:
+        places = []
+    R, t, _ = world2model
+    contacts = np.array([w.contact if w.contact is not None else f.geometry.contact
+                         for w, f in zip(session.world, session.features)])
+    for attempt in range(60):
+        if attempt < len(places):
+            contact, directions = places[attempt]
+        else:
+            if strategy == "next":
+                return None
+            site = entry.model.random_sites(1, rng=rng)[0] if entry.model.kind != "mesh" else \
+                [int(rng.integers(len(entry.model.faces))), *rng.dirichlet(np.ones(3))[1:]]
+            point = entry.model.site_frame(site).point
+            contact = (point - t) @ R                                                   # model -> world
+            if np.min(np.linalg.norm(contacts - contact, axis=1)) > RADIUS:
+                continue
+            a = rng.uniform(0.0, 2 * np.pi)
+            frame = entry.model.site_frame(site)
+            d1, d2 = frame.d1 @ R, frame.d2 @ R
+            b = a + np.deg2rad(spec["angle"])
+            directions = np.stack([np.cos(a) * d1 + np.sin(a) * d2, np.cos(b) * d1 + np.sin(b) * d2])
+        try:
+            return simulate_world_touch(entry.model, world2model, contact, directions, points=points,
+                                        spacing=SPACING, noise=spec["noise"], outward=spec["outward"], rng=rng)
+        except ValueError:
+            continue
+    return None
+
+
+def _session(task) -> dict:
+    kind, m_index, instance, seed = task
+    db, entry, first = _first(kind, m_index, instance, seed)
+    spec = SPECS[kind]
+    Rw, tw = random_rigid_motion(instance_rng(seed, m_index, instance, 77), extent=200.0)
+    world2model = (Rw.T, -Rw.T @ tw, 1.0)
+    rec = recognizer(db.entries)
+    out = {"set": kind, "model": entry.name, "instance": instance}
+    for strategy in STRATEGIES:
+        rng = instance_rng(seed, m_index, instance, 78 + STRATEGIES.index(strategy))
+        session = rec.session()
+        steps = []
+        touch, pose = first, sensor_to_world(first, (Rw, tw))
+        while True:
+            start = time.perf_counter()
+            result = session.add(touch, pose)
+            seconds = time.perf_counter() - start
+            steps.append({"best": result.best, "correct": result.best == entry.name,
+                          "confidence": result.confidence, "seconds": seconds, "slipped": list(result.slipped)})
+            if len(steps) >= TOUCHES:
+                break
+            start = time.perf_counter()
+            found = _next_touch(strategy, session, entry, world2model, spec, rng)
+            steps[-1]["propose_seconds"] = time.perf_counter() - start
+            if found is None:
+                break
+            touch, pose = found
+        out[strategy] = steps
+    return out
+
+
+def _saved(job):
+    task, folder = job
+    return saved_record(folder / f"{task[0]}-{task[1]}-{task[2]}-s{task[3]}.json", lambda: _session(task))
+
+
+def _at(steps: list, k: int) -> dict:
+    """The session's state after ``k`` touches (its last, if it stopped before)."""
+    return steps[min(k, len(steps)) - 1]
+
+
+def _quantiles(values) -> dict:
+    v = np.asarray(values, dtype=np.float64)
+    if v.size == 0:
+        return {"median": None, "p95": None, "max": None}
+    return {"median": float(np.median(v)), "p95": float(np.percentile(v, 95)), "max": float(v.max())}
+
+
+def summary(rows: list[dict]) -> dict:
+    out = {}
+    first = [r["next"][0]["seconds"] for r in rows] + [r["random"][0]["seconds"] for r in rows]
+    for strategy in STRATEGIES:
+        per_k = []
+        for k in range(1, TOUCHES + 1):
+            states = [_at(r[strategy], k) for r in rows]
+            conf = [s["confidence"] for s in states]
+            ok = [s["correct"] for s in states]
+            per_k.append({"touches": k, "accuracy_percent": 100.0 * float(np.mean(ok)),
+                          "mean_confidence": float(np.mean(conf)), "ece": expected_calibration_error(conf, ok)})
+        decide = [next((i + 1 for i, s in enumerate(r[strategy]) if s["confidence"] >= 0.99), TOUCHES)
+                  for r in rows]
+        adds = [s["seconds"] for r in rows for s in r[strategy][1:]]
+        out[strategy] = {"per_touches": per_k, "mean_touches_to_0.99": float(np.mean(decide)),
+                         "add_seconds": _quantiles(adds),
+                         "add_ratio_of_medians": float(np.median(adds) / np.median(first)) if adds else None,
+                         "propose_seconds": _quantiles([s["propose_seconds"] for r in rows for s in r[strategy]
+                                                        if "propose_seconds" in s])}
+    out["first_touch_seconds"] = _quantiles(first)
+    out["sessions"] = len(rows)
+    return out
+
+
+def _plot(table: dict, out: Path) -> None:
+    from ..plots import _plt, save_figure
+
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for name, s in table["summary"].items():
+        for strategy in STRATEGIES:
+            k = [p["touches"] for p in s[strategy]["per_touches"]]
+            acc = [p["accuracy_percent"] for p in s[strategy]["per_touches"]]
+            ax.plot(k, acc, marker="o", ls="-" if strategy == "next" else "--", label=f"{name}, {strategy}")
+    ax.axhline(99, color="grey", lw=0.8)
+    ax.set_xlabel("touches")
+    ax.set_ylabel("accuracy (%)")
+    ax.set_xticks(range(1, TOUCHES + 1))
+    ax.legend(fontsize=8)
+    ax.set_title("multi-touch sessions: accuracy against touches")
+    save_figure(fig, out / "multi-touch.png")
+    from .calibration import reliability
+
+    fig, ax = plt.subplots(figsize=(5, 5))
+    ax.plot([0, 1], [0, 1], color="grey", lw=0.8, ls="--")
+    for r in table["records_by_set"]:
+        rows = table["records_by_set"][r]
+        conf = [s["confidence"] for row in rows for strategy in STRATEGIES for s in row[strategy]]
+        ok = [s["correct"] for row in rows for strategy in STRATEGIES for s in row[strategy]]
+        bins = reliability(conf, ok)
+        ax.plot([b["confidence"] for b in bins], [b["accuracy"] for b in bins], marker="o",
+                label=f"{r} (ECE {expected_calibration_error(conf, ok):.3f})")
+    ax.set_xlabel("confidence")
+    ax.set_ylabel("accuracy")
+    ax.legend(fontsize=8)
+    ax.set_title("reliability over every session state")
+    save_figure(fig, out / "multi-touch-reliability.png")
+
+
+def run(*, out, instances: int = 10, seed: int = 0, jobs: int | None = None, quiet: bool = False, sets=SETS,
+        **_ignored) -> dict:
+    """Run the sessions of ``sets``; write ``multi-touch.json``, ``.md`` and the plots."""
+    from ..surfaces import ycb_names
+
+    out = Path(out)
+    folder = out / "multi-touch.parts" / _code_hash()
+    folder.mkdir(parents=True, exist_ok=True)
+    tasks = []
+    if "hard-10" in sets:
+        tasks += [("hard-10", m, i, seed) for m in range(len(BUILTIN_SETS["paper-fig11"])) for i in range(instances)]
+    if "p3-78" in sets:
+        tasks += [("p3-78", m, i, seed) for m in range(len(ycb_names())) for i in range(math.ceil(instances / 10))]
+    records = run_parallel(_saved, [(t, folder) for t in tasks], jobs=jobs or 1, quiet=quiet, desc="multi-touch")
+    by_set = {s: [r for r in records if r["set"] == s] for s in sets}
+    table = {"benchmark": "multi-touch", "instances": instances, "seed": seed, "radius_mm": RADIUS,
+             "summary": {s: summary(rows) for s, rows in by_set.items() if rows}, "records": records}
+    out.mkdir(parents=True, exist_ok=True)
+    write_json(out / "multi-touch.json", table)
+    lines = [f"Sessions of up to {TOUCHES} touches (seed {seed}), method fast; accuracy (mean confidence) after "
+             "each touch count.", "",
+             "| set | strategy | " + " | ".join(f"{k} touch{'es' if k > 1 else ''}" for k in range(1, TOUCHES + 1))
+             + " | touches to 0.99 | add s median / p95 / max | add / first, medians |",
+             "|---|---|" + "---|" * (TOUCHES + 3)]
+    for name, s in table["summary"].items():
+        for strategy in STRATEGIES:
+            st = s[strategy]
+            cells = [f"{p['accuracy_percent']:.1f}% ({p['mean_confidence']:.2f})" for p in st["per_touches"]]
+            a = st["add_seconds"]
+            adds = "-" if a["median"] is None else f"{a['median']:.2f} / {a['p95']:.2f} / {a['max']:.2f}"
+            ratio = "-" if st["add_ratio_of_medians"] is None else f"{st['add_ratio_of_medians']:.2f}"
+            lines.append(f"| {name} ({s['sessions']}) | {strategy} | " + " | ".join(cells)
+                         + f" | {st['mean_touches_to_0.99']:.2f} | {adds} | {ratio} |")
+    table["text"] = "\n".join(lines) + "\n"
+    write_text_atomic(out / "multi-touch.md", table["text"])
+    _plot(dict(table, records_by_set=by_set), out)
+    return table

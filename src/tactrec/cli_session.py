@@ -1,0 +1,95 @@
+"""The ``tactrec`` command's sessions: ``recognize SESSION`` and ``next SESSION`` (INTERFACE.md)."""
+
+from __future__ import annotations
+
+import json
+import sys
+
+from .errors import InputError
+from .units import conversion
+
+__all__ = ["recognize_session", "format_session", "cmd_next", "add_next_parser", "DEFAULT_RADIUS_MM"]
+
+#: how far from an earlier contact ``next`` may propose a touch, millimetres (converted to the session's units)
+DEFAULT_RADIUS_MM = 40.0
+#: how near every leading hypothesis must put the proposed contact to its surface, millimetres
+DEFAULT_TOLERANCE_MM = 1.0
+
+
+def recognize_session(recognizer, touches):
+    """A :class:`~tactrec.session.Session` of ``touches`` (:class:`~tactrec.io.session.SessionTouch`), all added."""
+    session = recognizer.session()
+    for t in touches:
+        session.add(t.data, (t.rotation, t.translation))
+    return session
+
+
+def format_session(name: str, result) -> str:
+    """The text form of a session's result."""
+    slipped = f", slipped touches {list(result.slipped)}" if result.slipped else ""
+    flag = ", ambiguous" if result.ambiguous else ""
+    lines = [f"{name}: {result.touches} touches, best {result.best}   (confidence {result.confidence:.3f}"
+             f"{flag}{slipped}; {result.seconds:.2f} s)"]
+    p = result.probabilities
+    for rank, h in enumerate(result.ranking, start=1):
+        per = ", ".join(f"{e:.4g}" for e in h.per_touch)
+        lines.append(f"  {rank:2d}. {h.model:24s} error {h.error:.6g}   probability {p.get(h.model, 0.0):.3g}"
+                     f"   per touch [{per}]")
+    for model, why in result.rejected.items():
+        lines.append(f"   -. {model:24s} rejected: {why}")
+    return "\n".join(lines)
+
+
+def _in_units(mm: float, units: str | None) -> float:
+    return mm * (conversion("mm", units) if units else 1.0)
+
+
+def cmd_next(args, *, open_models, options, warn) -> int:
+    """``tactrec next SESSION --db DB``: where to touch next."""
+    from .io.session import load_session
+    from .recognition import Recognizer, default_workers
+
+    touches = load_session(args.session)
+    units = touches[0].data.units
+    radius = args.radius if args.radius is not None else _in_units(DEFAULT_RADIUS_MM, units)
+    tolerance = args.tolerance if args.tolerance is not None else _in_units(DEFAULT_TOLERANCE_MM, units)
+    db = open_models(db=args.db, models=args.models, warn=warn, quiet=args.quiet, units=args.units, scale=args.scale)
+    workers = default_workers() if len(db) > 4 else 1
+    with Recognizer(db, method=args.method, workers=workers, **options) as recognizer:
+        session = recognize_session(recognizer, touches)
+        if not session.result.ranking:
+            raise InputError("no model fits any touch of the session: nothing to propose", args.session)
+        proposal = session.next(radius=radius, tolerance=tolerance, angle=args.angle, rng=args.seed)
+    out = proposal.to_json()
+    if args.json:
+        sys.stdout.write(json.dumps(out) + "\n")
+        return 0
+    hyps = ", ".join(f"{h['model']} {h['probability']:.3f}" for h in out["hypotheses"])
+    if proposal.contact is None:
+        print(f"{args.session}: nothing to propose: {proposal.reason} ({hyps})")
+        return 0
+    fmt = lambda v: ", ".join(f"{x:.4g}" for x in v)  # noqa: E731
+    print(f"{args.session}: touch at ({fmt(proposal.contact)}), approach along -({fmt(proposal.normal)}); "
+          f"expected gain {proposal.gain:.3f} bits")
+    for i, d in enumerate(proposal.directions, start=1):
+        print(f"  curve {i} along ({fmt(d)})")
+    print(f"  separates: {hyps}")
+    return 0
+
+
+def add_next_parser(sub, *, positive, mesh_options, methods, default_method) -> None:
+    p = sub.add_parser("next", help="propose the touch that best separates a session's hypotheses")
+    p.add_argument("session", metavar="SESSION", help="session file (.json; a tactile data file is a session of one)")
+    p.add_argument("--db", metavar="DB", help="database built by 'tactrec build'")
+    p.add_argument("--models", nargs="+", metavar="MODEL", help="model files or built-in names, instead of --db")
+    p.add_argument("--json", action="store_true", help="the proposal as one JSON object")
+    p.add_argument("--radius", type=positive, help="how far from an earlier touch's contact the proposed one may be, "
+                   f"in the session's units (default {DEFAULT_RADIUS_MM:g} mm)")
+    p.add_argument("--tolerance", type=positive, help="how near its surface every leading hypothesis must put the "
+                   f"proposed contact, session units (default {DEFAULT_TOLERANCE_MM:g} mm)")
+    p.add_argument("--angle", type=positive, default=60.0, help="degrees between the proposed curves (default 60)")
+    p.add_argument("--method", choices=sorted(methods), default=default_method,
+                   help=f"registration method (default {default_method})")
+    p.add_argument("--seed", type=int, default=0, help="random seed of the candidate places (default 0)")
+    mesh_options(p)
+    p.add_argument("--quiet", action="store_true", help="no progress bar")

@@ -1,0 +1,129 @@
+"""Session files: several touches of one still object, in one world frame (INTERFACE.md).
+
+A session is JSON with ``touches``, each a tactile data object (``curves``,
+optional ``contact``, ``outward``, ``units``) in its sensor's frame, with an
+optional ``sensor2world`` pose (``world = R @ sensor + t``; without it the
+points are already in the world frame).  ``units`` may sit on the session.
+A plain tactile data file is a session of one touch.  Everything is
+validated here and a problem is one :class:`~tactrec.errors.InputError`
+naming the file, and the touch, and what is wrong.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from ..errors import InputError
+from .atomic import write_text_atomic
+from .meeting import check_meeting
+from .touch import TactileData, _parse_json, _read_text, _vector, load_touch
+
+__all__ = ["SessionTouch", "load_session", "save_session", "is_session_file", "rigid_pose"]
+
+
+def rigid_pose(rotation, translation, source: str, what: str = "sensor2world") -> tuple[np.ndarray, np.ndarray]:
+    """Validate a rigid motion: ``rotation`` a proper rotation (orthonormal to 1e-6, determinant +1)
+    and ``translation`` three finite numbers.  Returns them as arrays."""
+    try:
+        R = np.array(rotation, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InputError(f"'{what}' rotation must be a 3 x 3 array of numbers", source) from None
+    if R.shape != (3, 3) or not np.isfinite(R).all():
+        raise InputError(f"'{what}' rotation must be a 3 x 3 array of finite numbers", source)
+    if np.max(np.abs(R @ R.T - np.eye(3))) > 1e-6 or np.linalg.det(R) < 0:
+        raise InputError(f"'{what}' rotation is not a rotation (orthonormal, determinant +1)", source)
+    return R, _vector(translation, f"{what} translation", source)
+
+
+@dataclasses.dataclass(frozen=True)
+class SessionTouch:
+    """One touch of a session: the data in its sensor's frame and the sensor's pose in the world.
+
+    Attributes
+    ----------
+    data : TactileData
+        Sensor frame.
+    rotation, translation : (3, 3), (3,) float
+        ``sensor2world``: ``world = rotation @ sensor + translation`` (identity when absent).
+    """
+
+    data: TactileData
+    rotation: np.ndarray = dataclasses.field(default_factory=lambda: np.eye(3))
+    translation: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(3))
+
+    def in_world(self) -> TactileData:
+        """The touch in the world frame."""
+        return self.data.transformed(self.rotation, self.translation)
+
+    def to_json(self) -> dict:
+        out = self.data.to_json()
+        out["sensor2world"] = {"rotation": self.rotation.tolist(), "translation": self.translation.tolist()}
+        return out
+
+
+def is_session_file(path: str | os.PathLike) -> bool:
+    """Whether ``path`` is a JSON object with ``touches`` (read only as far as needed to say)."""
+    path = Path(path)
+    if path.suffix.lower() != ".json":
+        return False
+    try:
+        obj = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError, UnicodeDecodeError):
+        return False
+    return isinstance(obj, dict) and "touches" in obj
+
+
+def load_session(path: str | os.PathLike) -> list[SessionTouch]:
+    """The touches of a session file (or of a plain tactile data file: one touch, world frame)."""
+    path = Path(path)
+    if not is_session_file(path):
+        return [SessionTouch(load_touch(path))]
+    text = _read_text(path)
+    obj = json.loads(text)
+    touches = obj["touches"]
+    if not isinstance(touches, list) or not touches:
+        raise InputError("'touches' must be a non-empty list of touches", path)
+    units = obj.get("units")
+    out = []
+    for i, item in enumerate(touches, start=1):
+        source = f"{path} (touch {i})"
+        if not isinstance(item, dict):
+            raise InputError("a touch must be a JSON object with 'curves'", source)
+        pose = item.get("sensor2world")
+        item = {k: v for k, v in item.items() if k != "sensor2world"}
+        if units is not None and "units" not in item:
+            item["units"] = units
+        data = _parse_json(json.dumps(item), source)
+        check_meeting(data)
+        if pose is None:
+            out.append(SessionTouch(data))
+            continue
+        if not isinstance(pose, dict) or set(pose) != {"rotation", "translation"}:
+            raise InputError("'sensor2world' must be an object with 'rotation' and 'translation'", source)
+        R, t = rigid_pose(pose["rotation"], pose["translation"], source)
+        out.append(SessionTouch(data, R, t))
+    kinds = {t.data.units for t in out}
+    if len(kinds) > 1:
+        raise InputError(f"the touches are in different units ({', '.join(sorted(map(str, kinds)))})", path)
+    return out
+
+
+def save_session(touches: Sequence[SessionTouch], path: str | os.PathLike) -> None:
+    """Write a session file atomically."""
+    units = {t.data.units for t in touches}
+    obj: dict = {}
+    if len(units) == 1 and None not in units:
+        obj["units"] = units.pop()
+    obj["touches"] = []
+    for t in touches:
+        item = t.to_json()
+        if "units" in obj:
+            item.pop("units", None)
+        obj["touches"].append(item)
+    write_text_atomic(Path(path), json.dumps(obj) + "\n")

@@ -1,0 +1,376 @@
+"""Several touches of one still object: one pose per model that fits them all.
+
+A :class:`Session` keeps the touches of one object in a common *world*
+frame.  Adding a touch (:meth:`Session.add`) costs one recognition of that
+touch plus a joint refinement:
+
+1. the touch, moved into the world frame by its ``sensor2world`` pose, is
+   recognised on its own by the recognizer's method; each accepted model's
+   registration is then a world-to-model pose;
+2. for every model, the candidate poses are its joint pose so far (with the
+   poses along its free motions, where they were computed) and the new
+   touch's poses on it (the best and the others its search refined); each is
+   scored on all touches' points, and the best two are refined jointly
+   (point-to-plane Gauss-Newton on every point of every touch kept);
+3. a touch is *consistent* with a pose when its mean distance under it is
+   within three standard errors of its own fit on that model (or of a fit at
+   its noise, when the model was not accepted for it alone): the noise of
+   that touch decides, not a fixed tolerance.  A pose is fitted to the
+   touches consistent with it, most touches first;
+4. a touch consistent with no model's joint pose is reported as *slipped*
+   (the contact moved, or the object did) and left out of every fit and
+   probability, never averaged in;
+5. the probabilities (:mod:`tactrec.probability`) come from every model's
+   distances to the points of all touches not slipped, under its joint pose.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+
+from .errors import InputError
+from .io.session import SessionTouch, rigid_pose
+from .io.touch import TactileData
+from .linalg import transform
+from .probability import AMBIGUOUS, Evidence, evidence, residuals
+
+
+__all__ = ["Session", "SessionResult", "Hypothesis", "CONSISTENT_SE"]
+
+#: a touch is consistent with a pose when its mean distance is within this many standard errors of its own fit
+CONSISTENT_SE = 3.0
+#: Gauss-Newton steps of a joint refinement, and how many candidate poses per model are refined
+JOINT_ITERATIONS, REFINED = 15, 2
+#: poses kept per model (the best and others the touches fit as well), and how far apart their contacts must be
+#: (a fraction of the touches' reach)
+FAMILY, APART = 5, 0.5
+#: a motion is free when the fit's curvature along it is below this fraction of the largest; Gauss-Newton
+#: steps of a pose moved along it
+FREE, FAMILY_ITERATIONS = 1e-3, 6
+
+
+@dataclasses.dataclass(frozen=True)
+class Hypothesis:
+    """One model's joint pose over a session's touches.
+
+    Attributes
+    ----------
+    model : str
+    rotation, translation : (3, 3), (3,) float
+        ``world2model``: ``model = scale * rotation @ world + translation``.
+    scale : float
+        World (data) units to model units.
+    error : float
+        Mean distance of the points of the touches it fits to the model, data units.
+    per_touch : (N,) float
+        Each touch's mean distance under this pose, data units.
+    consistent : tuple of bool
+        Whether each touch is consistent with the pose (see the module text).
+    poses : (p, 3, 4) float or None
+        The pose first, then poses along the motions the touches leave free (along a cylinder,
+        over a flat patch) that every touch is still consistent with (``[R | t]`` each);
+        computed when :meth:`Session.family` is asked (None until then).
+    """
+
+    model: str
+    rotation: np.ndarray
+    translation: np.ndarray
+    scale: float
+    error: float
+    per_touch: np.ndarray
+    consistent: tuple
+    poses: np.ndarray | None = None
+
+    def to_json(self, probability: float | None = None) -> dict:
+        out = {"model": self.model, "error": float(self.error), "rotation": self.rotation.tolist(),
+               "translation": self.translation.tolist(), "per_touch_error": [float(e) for e in self.per_touch]}
+        if self.scale != 1.0:
+            out["scale"] = float(self.scale)
+        if probability is not None:
+            out["probability"] = float(probability)
+        if not all(self.consistent):
+            out["inconsistent_touches"] = [i for i, c in enumerate(self.consistent) if not c]
+        return out
+
+
+@dataclasses.dataclass(frozen=True)
+class SessionResult:
+    """The recognition of a session: one object, one pose per model.
+
+    ``ranking`` holds the models with a joint pose, by error over the touches not slipped;
+    ``probabilities`` are theirs (sum 1); ``slipped`` the touches no model's pose fits.
+    """
+
+    ranking: list
+    evidence: Evidence | None
+    slipped: tuple
+    touches: int
+    rejected: dict
+    seconds: float
+
+    @property
+    def best(self) -> str | None:
+        return self.ranking[0].model if self.ranking else None
+
+    @property
+    def probabilities(self) -> dict[str, float]:
+        if self.evidence is None:
+            return {}
+        return dict(zip(self.evidence.models, self.evidence.probabilities().tolist()))
+
+    @property
+    def confidence(self) -> float:
+        return float(self.probabilities.get(self.best, 0.0)) if self.best else 0.0
+
+    @property
+    def ambiguous(self) -> bool:
+        return self.best is not None and self.confidence < AMBIGUOUS
+
+    def hypothesis(self, model: str) -> Hypothesis | None:
+        return next((h for h in self.ranking if h.model == model), None)
+
+    def to_json(self) -> dict:
+        """INTERFACE.md's result for a session (``rotation``/``translation`` map the world onto each model)."""
+        p = self.probabilities
+        ranking = [h.to_json(p.get(h.model)) for h in self.ranking]
+        ranking += [{"model": name, "error": None, "rejected": why} for name, why in self.rejected.items()]
+        return {"best": self.best, "ranking": ranking, "confidence": self.confidence, "ambiguous": self.ambiguous,
+                "touches": self.touches, "slipped": list(self.slipped), "seconds": round(self.seconds, 4)}
+
+
+def _refine(model, R: np.ndarray, t: np.ndarray, x: np.ndarray, iterations: int):
+    """Poses ``R (h, 3, 3), t (h, 3)`` refined on points ``x (m, 3)`` (model units): ``R, t, error (h,)``."""
+    if model.kind == "mesh":
+        from .registration import mesh_fast
+
+        R, t, error, _ = mesh_fast.refine(model, R, t, x, iterations=iterations)
+        return R, t, error
+    from .registration import closedform_fast
+
+    return closedform_fast.refine(model, R, t, x, iterations=iterations)
+
+
+def _normals(model, points: np.ndarray) -> np.ndarray:
+    """Unit normals ``(m, 3)`` of the planes ``points (m, 3)`` (model units) are measured against."""
+    if model.kind == "mesh":
+        from .registration.mesh_fast import _planes
+
+        return _planes(model, points[None])[1][0]
+    g = model.implicit(points, order=1)[..., 1:]
+    return g / np.maximum(np.linalg.norm(g, axis=-1, keepdims=True), 1e-300)
+
+
+def _fit_error(touch, registration) -> float:
+    """A touch's own fit on a model (data units), or, where the model was not accepted for it, the
+    mean distance of a fit at its noise."""
+    if registration is not None and registration.ok:
+        return registration.error / registration.scale
+    return touch.noise * np.sqrt(2.0 / np.pi)
+
+
+class Session:
+    """Touches of one still object, recognised together (see the module text).
+
+    Parameters
+    ----------
+    recognizer : tactrec.recognition.Recognizer
+        Holds the models and the method; it is used for each touch on its own and kept between
+        touches (nothing is rebuilt).
+    """
+
+    def __init__(self, recognizer, *, joint_search: bool = True):
+        self.joint_search = joint_search
+        self.searches: list = []               # this touch's recognitions: where new candidate poses come from
+        self.recognizer = recognizer
+        self.touches: list[SessionTouch] = []
+        self.world: list[TactileData] = []
+        self.solo: list = []                   # each touch's own Recognition (world frame)
+        self.features: list = []
+        self._joint: dict[str, Hypothesis] = {}
+        self.result: SessionResult | None = None
+
+    def add(self, data: TactileData, sensor2world=None) -> SessionResult:
+        """Add a touch (sensor frame; ``sensor2world`` a ``(rotation, translation)`` pair or None for
+        points already in the world frame) and recognise the session again."""
+        start = time.perf_counter()
+        if sensor2world is None:
+            touch = SessionTouch(data)
+        else:
+            touch = SessionTouch(data, *rigid_pose(*sensor2world, data.source))
+        if self.touches and data.units != self.touches[0].data.units:
+            raise InputError(f"this touch is in {data.units!r}, the session in {self.touches[0].data.units!r}",
+                             data.source)
+        world = touch.in_world()
+        slipped = set(self.result.slipped) if self.result is not None else set()
+        context = [c for i, w in enumerate(self.world) if i not in slipped for c in w.curves]
+        rec = self.recognizer.recognize(world)
+        from .features import Touch
+
+        self.touches.append(touch)
+        self.world.append(world)
+        self.solo.append(rec)
+        self.searches = [rec]
+        self.features.append(Touch.from_data(world, **self.recognizer.estimation))
+        self.result = self._joint_fit()
+        best = self.result.hypothesis(self.result.best) if self.result.best else None
+        if self.joint_search and context and (best is None or not all(
+                best.consistent[i] for i in range(len(self.features)) if i not in self.result.slipped)):
+            # no pose found fits every touch: search again from this touch, scoring poses on all
+            self.searches.append(self.recognizer.recognize(world, context=context))
+            self.result = self._joint_fit()
+        self.result = dataclasses.replace(self.result, seconds=time.perf_counter() - start)
+        return self.result
+
+    def next(self, *, radius: float, tolerance: float = 1.0, angle: float = 60.0, candidates: int = 48, rng=None):
+        """Where to touch next (:func:`tactrec.proposal.propose`)."""
+        from .proposal import propose
+
+        return propose(self, radius=radius, tolerance=tolerance, angle=angle, candidates=candidates, rng=rng)
+
+    # -- the joint fit --------------------------------------------------------------------------
+
+    def _candidates(self, name: str) -> list[tuple[np.ndarray, np.ndarray, float]]:
+        poses = []
+        if name in self._joint:
+            h = self._joint[name]
+            family = h.poses if h.poses is not None else [np.concatenate([h.rotation, h.translation[:, None]], 1)]
+            poses += [(pose[:, :3], pose[:, 3], h.scale) for pose in family]
+        for rec in self.searches:
+            r = next((r for r in rec.ranking if r.model == name and r.ok), None)
+            if r is not None:
+                poses.append((r.rotation, r.translation, r.scale))
+                for alt in (() if r.alternatives is None else r.alternatives):
+                    poses.append((alt[:, :3], alt[:, 3], r.scale))
+        return poses
+
+    def _per_touch(self, model, R, t, scale) -> np.ndarray:
+        """Mean distance of each touch's points under poses ``R (h, 3, 3), t (h, 3)``: ``(h, N)``, data units."""
+        out = []
+        for f in self.features:
+            d = model.distance(transform(R, t, f.points * scale)) / scale
+            out.append(np.mean(d, axis=1))
+        return np.stack(out, axis=1)
+
+    def _consistent(self, name: str, per_touch: np.ndarray) -> np.ndarray:
+        """Which touches are consistent with poses whose per-touch errors are ``per_touch (h, N)``."""
+        own, se = [], []
+        for f, rec in zip(self.features, self.solo):
+            r = next((r for r in rec.ranking if r.model == name), None)
+            e = _fit_error(f, r)
+            fit = max(e, f.noise * np.sqrt(2.0 / np.pi))
+            own.append(fit)
+            se.append(fit * np.sqrt(np.pi / 2.0 - 1.0) / np.sqrt(len(f.points)))
+        return per_touch <= np.array(own)[None] + CONSISTENT_SE * np.array(se)[None]
+
+    def _fit_model(self, entry, use: np.ndarray) -> Hypothesis | None:
+        """The model's joint pose on the touches ``use (N,)`` (bool): its candidate poses scored on
+        them, the best :data:`REFINED` refined on their points, the best kept."""
+        model, name = entry.model, entry.name
+        poses = self._candidates(name)
+        if not poses:
+            return None
+        scale = poses[0][2]
+        R = np.stack([p[0] for p in poses])
+        t = np.stack([p[1] for p in poses])
+        sizes = np.array([len(f.points) for f in self.features])
+        weight = sizes * use
+        per = self._per_touch(model, R, t, scale)                                         # (h, N)
+        x = np.concatenate([f.points for f, u in zip(self.features, use) if u]) * scale
+        best = None
+        for k in np.argsort(per @ weight, kind="stable")[:REFINED]:
+            Rk, tk, _ = _refine(model, R[k:k + 1], t[k:k + 1], x, JOINT_ITERATIONS)
+            per_k = self._per_touch(model, Rk, tk, scale)[0]
+            if not per_k @ weight <= per[k] @ weight:                      # keep the start if not better
+                Rk, tk, per_k = R[k:k + 1], t[k:k + 1], per[k]
+            err = float(per_k @ weight / max(weight.sum(), 1))
+            if best is None or err < best.error:
+                best = Hypothesis(name, Rk[0], tk[0], scale, err, per_k,
+                                  tuple(bool(c) for c in self._consistent(name, per_k[None])[0]))
+        return best
+
+    def family(self, name: str) -> np.ndarray:
+        """Model ``name``'s pose and the poses along the motions its touches leave free, ``(p, 3, 4)``
+        (:meth:`_family`; computed when asked, for the models :meth:`next` weighs)."""
+        h = self._joint[name]
+        if h.poses is None:
+            model = next(e.model for e in self.recognizer.models if e.name == name)
+            use = np.array([i not in self.result.slipped for i in range(len(self.features))])
+            x = np.concatenate([f.points for f, u in zip(self.features, use) if u]) * h.scale
+            h = dataclasses.replace(h, poses=self._family(model, h, use, x))
+            self._joint[name] = h
+        return h.poses
+
+    def _family(self, model, best: Hypothesis, use: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """``best``'s pose, then poses along the motions the touches leave free (the directions
+        of least curvature of the fit's point-to-plane normal matrix, below :data:`FREE` x its
+        largest): each moved by a quarter and a half of the model's size both ways, refined,
+        and kept if every touch used is still consistent with it (see :meth:`_distinct`)."""
+        from .registration.result import rotations_from_vectors
+
+        moved = x @ best.rotation.T + best.translation
+        n = _normals(model, moved)
+        J = np.concatenate([np.cross(moved, n), n], axis=1)                             # (m, 6)
+        values, vectors = np.linalg.eigh(J.T @ J)
+        centre = moved.mean(axis=0)
+        R, t = [], []
+        for k in np.nonzero(values < FREE * values[-1])[0]:
+            w, u = vectors[:3, k], vectors[3:, k]
+            step = np.linalg.norm(np.cross(w, centre) + u)
+            if step <= 0:
+                continue
+            for f in (-0.5, -0.25, 0.25, 0.5):
+                a = f * model.size / step
+                dR = rotations_from_vectors((a * w)[None])[0]
+                R.append(dR @ best.rotation)
+                t.append(dR @ (best.translation - centre) + centre + a * (u + np.cross(w, centre)) - a * np.cross(w, centre))
+        if not R:
+            return self._distinct(best, np.empty((0, 3, 3)), np.empty((0, 3)))
+        R, t, _ = _refine(model, np.array(R), np.array(t), x, FAMILY_ITERATIONS)
+        per = self._per_touch(model, R, t, best.scale)
+        fits = self._consistent(best.model, per)[:, use].all(axis=1)
+        return self._distinct(best, R[fits], t[fits])
+
+    def _distinct(self, best: Hypothesis, R: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """``best``'s pose and up to :data:`FAMILY` - 1 of the poses ``R, t`` that put the touches'
+        contacts more than :data:`APART` x the touches' reach from where every pose kept puts them."""
+        contacts = np.array([f.geometry.contact for f in self.features]) * best.scale
+        reach = max(f.reach for f in self.features) * best.scale
+        kept = [np.concatenate([best.rotation, best.translation[:, None]], axis=1)]
+        where = [contacts @ best.rotation.T + best.translation]
+        for Rk, tk in zip(R, t):
+            if len(kept) >= FAMILY:
+                break
+            x = contacts @ Rk.T + tk
+            if all(np.max(np.linalg.norm(x - w, axis=1)) > APART * reach for w in where):
+                kept.append(np.concatenate([Rk, tk[:, None]], axis=1))
+                where.append(x)
+        return np.array(kept)
+
+    def _joint_fit(self) -> SessionResult:
+        n = len(self.features)
+        every = np.ones(n, dtype=bool)
+        found = {e.name: h for e in self.recognizer.models if (h := self._fit_model(e, every)) is not None}
+        # a touch has slipped when no pose that fits most touches fits it; without such a pose
+        # the session cannot tell which touch is the odd one out
+        majority = [h for h in found.values() if 2 * sum(h.consistent) > n]
+        slipped = tuple(i for i in range(n) if not any(h.consistent[i] for h in majority)) if majority else ()
+        keep = [i for i in range(n) if i not in slipped]
+        if slipped:
+            use = np.isin(np.arange(n), keep)
+            found = {e.name: h for e in self.recognizer.models if (h := self._fit_model(e, use)) is not None}
+        self._joint = found
+        by_name = {e.name: e for e in self.recognizer.models}
+        ranked = sorted(found.values(), key=lambda h: (h.error, h.model))
+        ev = None
+        if ranked and keep:
+            x = np.concatenate([self.features[i].points for i in keep])
+            curves = [len(c) for i in keep for c in self.features[i].curves]
+            signed = [residuals(by_name[h.model].model, h.rotation, h.translation, x, h.scale) for h in ranked]
+            ev = evidence([h.model for h in ranked], signed, curves, float(np.median([f.noise for f in self.features])))
+        rejected = {e.name: "no pose from any touch" for e in self.recognizer.models if e.name not in found}
+        return SessionResult(ranked, ev, slipped, n, rejected, 0.0)
+
+

@@ -1,0 +1,130 @@
+"""Probabilities of a recognition (tactrec.probability): the rule, its scale, its calibration."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import special
+
+from tactrec.bench.calibration import expected_calibration_error, reliability
+from tactrec.bench.common import instance_rng
+from tactrec.probability import bootstrap_probabilities, evidence
+from tactrec.recognition import Recognizer
+from tactrec.simulation import simulate_random_touch
+
+
+@pytest.fixture(scope="module")
+def small():
+    from test_fast import _small_meshes
+
+    return _small_meshes()
+
+
+def test_the_bootstrap_agrees_with_the_normal_theory_on_white_residuals():
+    """Two models' distances to 123 points, white, each resampled on its own: the share of
+    replicates the first wins matches Phi(difference of the means / the standard error of that
+    difference, sqrt(se1^2 + se2^2)) to 0.03, for three sizes of difference."""
+    rng = np.random.default_rng(7)
+    base = np.abs(rng.normal(0.0, 0.05, 123))
+    other = np.abs(rng.normal(0.0, 0.05, 123))
+    for shift in (0.002, 0.005, 0.01):
+        d = np.stack([base, other - other.mean() + base.mean() + shift])
+        se = np.hypot(*(np.std(r, ddof=1) / np.sqrt(123) for r in d))
+        expected = special.ndtr((d[1].mean() - d[0].mean()) / se)
+        p = bootstrap_probabilities(d, [41, 41, 41])
+        assert abs(p[0] - expected) < 0.03 and abs(p.sum() - 1.0) < 1e-12
+
+
+def test_bootstrap_limits_and_determinism():
+    """Equal rows share about equally; a row below the others by far takes it all; the same
+    input gives the same probabilities; a lone model has probability 1."""
+    d = np.abs(np.random.default_rng(1).normal(0.0, 0.05, (1, 60)))
+    assert np.allclose(bootstrap_probabilities(np.repeat(d, 3, axis=0), [20, 20, 20]), 1 / 3, atol=0.03)
+    assert bootstrap_probabilities(np.concatenate([d, d + 0.05]), [30, 30]).tolist() == [1.0, 0.0]
+    e = np.concatenate([d, d[:, ::-1]])
+    assert bootstrap_probabilities(e, [30, 30]).tolist() == bootstrap_probabilities(e, [30, 30]).tolist()
+    assert bootstrap_probabilities(d, [60]).tolist() == [1.0]
+
+
+def test_a_smooth_misfit_is_resampled_in_blocks_and_decides_less():
+    """White residuals are drawn a point at a time; a smooth bow along each curve in long blocks,
+    so the same smoothly varying difference between two models is told apart less sharply."""
+    rng = np.random.default_rng(3)
+    sizes = [41, 41, 41]
+    white = rng.normal(0.0, 0.05, 123)
+    s = np.linspace(-1, 1, 41)
+    bow = np.tile(0.08 * (s * s - 1 / 3), 3) + rng.normal(0.0, 0.002, 123)
+    step = 0.012 + 0.03 * np.sin(np.pi * np.concatenate([s, s + 0.4, s - 0.7]))
+    a = evidence(["a", "b"], [white, np.abs(white) + step], sizes)
+    b = evidence(["a", "b"], [bow, np.abs(bow) + step], sizes)
+    assert a.block == 1 and b.block >= 10
+    assert a.probabilities()[0] > b.probabilities()[0] > 0.5
+
+
+def test_calibration_measures():
+    """ECE and the reliability bins on a hand-made set: two bins, gaps 0.05 and 0.35."""
+    conf = [0.95] * 10 + [0.55] * 10
+    ok = [True] * 10 + [True] * 2 + [False] * 8
+    bins = reliability(conf, ok)
+    assert [b["count"] for b in bins] == [10, 10]
+    assert expected_calibration_error(conf, ok) == pytest.approx(0.5 * 0.05 + 0.5 * 0.35)
+
+
+def test_confident_results_on_noisy_touches_are_right(small):
+    """24 seeded noisy touches (Gaussian 0.03 mm, no outward side) on four small meshes of distinct
+    shapes: every result with confidence >= 0.95 is right, at least 16 are that sure, and the
+    accepted models' probabilities sum to 1."""
+    sure = right = 0
+    with Recognizer(small) as recognizer:
+        for m_index, entry in enumerate(small):
+            for i in range(6):
+                touch = simulate_random_touch(entry.model, rng=instance_rng(31, m_index, i), points=41, spacing=0.3,
+                                              angle=60.0, noise=0.03, noise_kind="gaussian", outward=False)
+                result = recognizer.recognize(touch)
+                assert abs(sum(result.probabilities.values()) - 1.0) < 1e-9
+                if result.confidence >= 0.95:
+                    sure += 1
+                    right += result.best == entry.name
+    assert sure >= 16 and right == sure
+
+
+def test_confidence_on_twin_spheres_is_calibrated():
+    """Spheres of radius 30 and 31 mm, 40 seeded touches with Gaussian noise of 0.05 mm (no outward
+    side), where one touch often cannot tell them apart: the confidence does not overstate the
+    share recognised (mean confidence at most 0.05 above it, and within 0.25 below: the rule
+    resamples each model on its own, which on two shapes this alike understates how surely the
+    data tell them apart), and every result with confidence >= 0.95 is right."""
+    import trimesh
+
+    from tactrec.recognition import ModelEntry
+    from tactrec.surfaces.mesh import MeshModel
+    from tactrec.tables import CurvatureTable
+
+    entries = []
+    for name, r in (("r30", 30.0), ("r31", 31.0)):
+        mesh = trimesh.creation.icosphere(subdivisions=5, radius=r)
+        model = MeshModel(mesh.vertices, mesh.faces, name=name, units="mm")
+        entries.append(ModelEntry(model, CurvatureTable(model.table_samples())))
+    rows = []
+    with Recognizer(entries) as recognizer:
+        for m_index, entry in enumerate(entries):
+            for i in range(20):
+                touch = simulate_random_touch(entry.model, rng=instance_rng(41, m_index, i), points=41, spacing=0.3,
+                                              angle=60.0, noise=0.05, noise_kind="gaussian", outward=False)
+                result = recognizer.recognize(touch)
+                rows.append((result.best == entry.name, result.confidence))
+    right = np.array([r[0] for r in rows])
+    conf = np.array([r[1] for r in rows])
+    assert 0.55 <= right.mean() <= 0.95                                  # the touches do leave doubt
+    assert -0.25 <= conf.mean() - right.mean() <= 0.05
+    assert right[conf >= 0.95].all()
+
+
+def test_the_ece_floor_of_a_calibrated_predictor_shrinks_with_the_touches():
+    """Answers drawn right with exactly their confidence: the ECE floor is about 0.1 on 50 touches
+    and below 0.02 on 20,000 (it is a property of the sample size, not of the probabilities)."""
+    from tactrec.bench.calibration import ece_if_calibrated
+
+    conf = np.random.default_rng(4).uniform(0.2, 1.0, 20_000)
+    assert 0.05 < ece_if_calibrated(conf[:50], draws=50) < 0.2
+    assert ece_if_calibrated(conf, draws=5) < 0.02
