@@ -147,8 +147,8 @@ def test_session_files_round_trip_and_bad_ones_are_one_line(tmp_path, capsys):
 
 def test_recognize_and_next_on_a_session_file(tmp_path, capsys):
     """The command line on a two-touch session of the ellipsoid among the closed-form surfaces: one
-    result with ``touches`` 2, per-touch errors and probabilities summing to 1; ``next --json``
-    gives the interface's keys."""
+    result with ``touches`` 2, a single touch's keys (contact, curvatures, each entry's location),
+    per-touch errors and probabilities summing to 1; ``next --json`` gives the interface's keys."""
     from tactrec.surfaces import load_model
 
     model = load_model("ellipsoid")
@@ -164,7 +164,8 @@ def test_recognize_and_next_on_a_session_file(tmp_path, capsys):
     assert out["best"] == "ellipsoid" and out["touches"] == 2
     accepted = [r for r in out["ranking"] if r["error"] is not None]
     assert abs(sum(r["probability"] for r in accepted) - 1.0) < 1e-9
-    assert all(len(r["per_touch_error"]) == 2 for r in accepted)
+    assert all(len(r["per_touch_error"]) == 2 and len(r["location"]) == 3 for r in accepted)
+    assert len(out["contact"]) == 3 and len(out["curvatures"]) == 2
     assert main(["next", str(path), "--models", "closed-form", "--json", "--quiet"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert {"contact", "gain", "hypotheses"} <= set(out)

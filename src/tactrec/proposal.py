@@ -8,9 +8,10 @@ proposed.
 
 Candidates.  Places on the leading hypotheses' surfaces (random sites of each
 model, carried into the world by its pose) that every leading hypothesis puts
-on the object's surface (within ``tolerance`` of its model) and that lie
-within ``radius`` of an earlier touch's contact: places the sensor can reach
-and every hypothesis agrees it will meet.
+on the object's surface (within ``tolerance`` of its model, under one of its
+poses), that lie within ``radius`` of an earlier touch's contact, and where
+every pose's surface takes the whole touch: places the sensor can reach and
+every hypothesis agrees it will meet and can trace.
 
 Gain.  At a candidate, each hypothesis predicts the touch the sensor would
 record: three curves through the place, in the same world directions, as the
@@ -176,9 +177,9 @@ def propose(session, *, radius: float, tolerance: float = 1.0, angle: float = 60
                            float(np.mean(models[g.model].distance(_to_model(g, x)))) / g.scale
                            for j, g in enumerate(poses)] for i, x in enumerate(predicted)])   # (i truth, j fitted)
             ok = np.array([x is not None for x in predicted])
-            if not ok.any():
+            if not ok.all():                     # a touch every pose can take: the true surface reaches too
                 continue
-            q = p * ok / np.sum(p * ok)                                  # where a pose's surface ends, no touch
+            q = p
             with np.errstate(under="ignore"):
                 after = q[None, :] * np.exp(-0.5 * np.minimum((d / se) ** 2, 1400.0))
                 after = after / after.sum(axis=1, keepdims=True)

@@ -2,7 +2,7 @@
 
 A :class:`Session` keeps the touches of one object in a common *world*
 frame.  Adding a touch (:meth:`Session.add`) costs one recognition of that
-touch plus a joint refinement:
+touch and a joint refinement (a second search only in step 5):
 
 1. the touch, moved into the world frame by its ``sensor2world`` pose, is
    recognised on its own by the recognizer's method; each accepted model's
@@ -15,13 +15,16 @@ touch plus a joint refinement:
 3. a touch is *consistent* with a pose when its mean distance under it is
    within three standard errors of its own fit on that model (or of a fit at
    its noise, when the model was not accepted for it alone): the noise of
-   that touch decides, not a fixed tolerance.  A pose is fitted to the
-   touches consistent with it, most touches first;
-4. a touch consistent with no model's joint pose is reported as *slipped*
+   that touch decides, not a fixed tolerance;
+4. a touch that no pose fitting most touches fits is reported as *slipped*
    (the contact moved, or the object did) and left out of every fit and
    probability, never averaged in;
-5. the probabilities (:mod:`tactrec.probability`) come from every model's
-   distances to the points of all touches not slipped, under its joint pose.
+5. when the best model's pose does not fit every touch kept, the new touch is
+   searched again with the earlier touches' points in the score
+   (:meth:`tactrec.recognition.Recognizer.recognize` with ``context``), and
+   steps 2-4 run again on its poses;
+6. the probabilities (:mod:`tactrec.probability`) come from every model's
+   distances to the points of all touches kept, under its joint pose.
 """
 
 from __future__ import annotations
@@ -32,6 +35,7 @@ import time
 import numpy as np
 
 from .errors import InputError
+from .features import Touch
 from .io.session import SessionTouch, rigid_pose
 from .io.touch import TactileData
 from .linalg import transform
@@ -84,9 +88,14 @@ class Hypothesis:
     consistent: tuple
     poses: np.ndarray | None = None
 
-    def to_json(self, probability: float | None = None) -> dict:
-        out = {"model": self.model, "error": float(self.error), "rotation": self.rotation.tolist(),
-               "translation": self.translation.tolist(), "per_touch_error": [float(e) for e in self.per_touch]}
+    def to_json(self, probability: float | None = None, contact: np.ndarray | None = None) -> dict:
+        """The ranking entry; ``location`` is where the world point ``contact`` (the latest touch's
+        contact) lies on the model under this pose."""
+        out = {"model": self.model, "error": float(self.error)}
+        if contact is not None:
+            out["location"] = (self.scale * self.rotation @ contact + self.translation).tolist()
+        out.update(rotation=self.rotation.tolist(), translation=self.translation.tolist(),
+                   per_touch_error=[float(e) for e in self.per_touch])
         if self.scale != 1.0:
             out["scale"] = float(self.scale)
         if probability is not None:
@@ -101,7 +110,8 @@ class SessionResult:
     """The recognition of a session: one object, one pose per model.
 
     ``ranking`` holds the models with a joint pose, by error over the touches not slipped;
-    ``probabilities`` are theirs (sum 1); ``slipped`` the touches no model's pose fits.
+    ``probabilities`` are theirs (sum 1); ``slipped`` the touches no model's pose fits;
+    ``estimate`` the latest touch's contact, normal and curvatures in the world frame.
     """
 
     ranking: list
@@ -110,6 +120,7 @@ class SessionResult:
     touches: int
     rejected: dict
     seconds: float
+    estimate: object = None
 
     @property
     def best(self) -> str | None:
@@ -135,10 +146,15 @@ class SessionResult:
     def to_json(self) -> dict:
         """INTERFACE.md's result for a session (``rotation``/``translation`` map the world onto each model)."""
         p = self.probabilities
-        ranking = [h.to_json(p.get(h.model)) for h in self.ranking]
+        g = self.estimate
+        ranking = [h.to_json(p.get(h.model), None if g is None else g.contact) for h in self.ranking]
         ranking += [{"model": name, "error": None, "rejected": why} for name, why in self.rejected.items()]
-        return {"best": self.best, "ranking": ranking, "confidence": self.confidence, "ambiguous": self.ambiguous,
-                "touches": self.touches, "slipped": list(self.slipped), "seconds": round(self.seconds, 4)}
+        out = {"best": self.best, "ranking": ranking}
+        if g is not None:                                            # the latest touch, world frame
+            out.update(contact=g.contact.tolist(), normal=g.normal.tolist(), curvatures=[g.k1, g.k2])
+        out.update(confidence=self.confidence, ambiguous=self.ambiguous, touches=self.touches,
+                   slipped=list(self.slipped), seconds=round(self.seconds, 4))
+        return out
 
 
 def _refine(model, R: np.ndarray, t: np.ndarray, x: np.ndarray, iterations: int):
@@ -179,6 +195,9 @@ class Session:
     recognizer : tactrec.recognition.Recognizer
         Holds the models and the method; it is used for each touch on its own and kept between
         touches (nothing is rebuilt).
+    joint_search : bool
+        When the best model's pose does not fit every touch, search the new touch again with the
+        earlier touches' points in the score (step 5 of the module text); False keeps to step 1.
     """
 
     def __init__(self, recognizer, *, joint_search: bool = True):
@@ -207,8 +226,6 @@ class Session:
         slipped = set(self.result.slipped) if self.result is not None else set()
         context = [c for i, w in enumerate(self.world) if i not in slipped for c in w.curves]
         rec = self.recognizer.recognize(world)
-        from .features import Touch
-
         self.touches.append(touch)
         self.world.append(world)
         self.solo.append(rec)
@@ -371,6 +388,6 @@ class Session:
             signed = [residuals(by_name[h.model].model, h.rotation, h.translation, x, h.scale) for h in ranked]
             ev = evidence([h.model for h in ranked], signed, curves, float(np.median([f.noise for f in self.features])))
         rejected = {e.name: "no pose from any touch" for e in self.recognizer.models if e.name not in found}
-        return SessionResult(ranked, ev, slipped, n, rejected, 0.0)
+        return SessionResult(ranked, ev, slipped, n, rejected, 0.0, self.features[-1].geometry)
 
 
