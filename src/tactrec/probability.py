@@ -45,12 +45,25 @@ from typing import Sequence
 
 import numpy as np
 
-__all__ = ["Evidence", "residuals", "evidence", "bootstrap_probabilities", "AMBIGUOUS", "REPLICATES"]
+__all__ = ["Evidence", "residuals", "evidence", "bootstrap_probabilities", "noise_fit", "fit_standard_error",
+           "AMBIGUOUS", "REPLICATES"]
 
 #: a result is ambiguous when its confidence (the best model's probability) is below this
 AMBIGUOUS = 0.95
 #: bootstrap replicates, and the seed they are drawn from
 REPLICATES, SEED = 2000, 20_261_123
+
+
+def noise_fit(sigma: float) -> float:
+    """The mean distance of a perfect fit under Gaussian noise of ``sigma`` per coordinate:
+    the half-normal's mean, ``sigma sqrt(2 / pi)``."""
+    return float(sigma) * np.sqrt(2.0 / np.pi)
+
+
+def fit_standard_error(fit: float, points: int) -> float:
+    """How far another draw of the noise moves a fit of mean distance ``fit`` over ``points`` points:
+    the half-normal's spread is ``sqrt(pi / 2 - 1)`` times its mean, so ``fit sqrt(pi / 2 - 1) / sqrt(points)``."""
+    return float(fit) * np.sqrt(np.pi / 2.0 - 1.0) / np.sqrt(points)
 
 
 def residuals(model, rotation: np.ndarray, translation: np.ndarray, points: np.ndarray, scale: float = 1.0) -> np.ndarray:

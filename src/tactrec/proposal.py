@@ -34,6 +34,7 @@ import dataclasses
 
 import numpy as np
 
+from .probability import fit_standard_error, noise_fit
 from .simulation import simulate_world_touch
 
 __all__ = ["Proposal", "propose", "MASS", "LEADING"]
@@ -153,8 +154,7 @@ def propose(session, *, radius: float, tolerance: float = 1.0, angle: float = 60
     points = int(np.median(sizes))
     spacing = float(np.median([w.spacing for w in session.world]))
     noise = float(np.median([f.noise for f in session.features]))
-    fit = max(noise * np.sqrt(2.0 / np.pi), 1e-3 * spacing)
-    se = fit * np.sqrt(np.pi / 2.0 - 1.0) / np.sqrt(3 * points)
+    se = fit_standard_error(max(noise_fit(noise), 1e-3 * spacing), 3 * points)
     best = None
     for h in leading:
         model = models[h.model]

@@ -39,7 +39,7 @@ from .features import Touch
 from .io.session import SessionTouch, rigid_pose
 from .io.touch import TactileData
 from .linalg import transform
-from .probability import AMBIGUOUS, Evidence, evidence, residuals
+from .probability import AMBIGUOUS, Evidence, evidence, fit_standard_error, noise_fit, residuals
 
 
 __all__ = ["Session", "SessionResult", "Hypothesis", "CONSISTENT_SE"]
@@ -184,7 +184,7 @@ def _fit_error(touch, registration) -> float:
     mean distance of a fit at its noise."""
     if registration is not None and registration.ok:
         return registration.error / registration.scale
-    return touch.noise * np.sqrt(2.0 / np.pi)
+    return noise_fit(touch.noise)
 
 
 class Session:
@@ -277,9 +277,9 @@ class Session:
         for f, rec in zip(self.features, self.solo):
             r = next((r for r in rec.ranking if r.model == name), None)
             e = _fit_error(f, r)
-            fit = max(e, f.noise * np.sqrt(2.0 / np.pi))
+            fit = max(e, noise_fit(f.noise))
             own.append(fit)
-            se.append(fit * np.sqrt(np.pi / 2.0 - 1.0) / np.sqrt(len(f.points)))
+            se.append(fit_standard_error(fit, len(f.points)))
         return per_touch <= np.array(own)[None] + CONSISTENT_SE * np.array(se)[None]
 
     def _fit_model(self, entry, use: np.ndarray) -> Hypothesis | None:

@@ -163,4 +163,6 @@ def within_noise(a: float, b: float, *, points: int, fit: float) -> bool:
     distance ``fit`` under the data's own noise.  Under Gaussian noise the distances of a right fit
     are half-normal, whose spread is ``sqrt(pi / 2 - 1)`` times their mean, so another draw of the
     same noise moves ``fit`` by about ``fit sqrt(pi / 2 - 1) / sqrt(points)``."""
-    return abs(a - b) <= 2.0 * fit * np.sqrt(np.pi / 2 - 1) / np.sqrt(points)
+    from ..probability import fit_standard_error
+
+    return abs(a - b) <= 2.0 * fit_standard_error(fit, points)
