@@ -487,6 +487,10 @@ def test_bench_sweep_options_belong_to_their_benchmarks(tmp_path, capsys):
         "paper-fig11", "--delta-only leaves l and phi at the defaults")
     bad(capsys, ["bench", "paper-fig11", "--lengths", "9,-1", "--out", tmp_path / "bench"], "--lengths",
         "positive")
+    bad(capsys, ["bench", "kernels", "--sets", "hard", "--out", tmp_path / "bench"], "kernels",
+        "--sets applies to calibration and multi-touch only")
+    bad(capsys, ["bench", "multi-touch", "--sets", "hard-10,soft", "--out", tmp_path / "bench"], "--sets",
+        "unknown set 'soft'")
     assert files_in(tmp_path) == []
 
 

@@ -226,6 +226,17 @@ def cmd_bench(args) -> int:
         raise InputError("--delta-only leaves l and phi at the defaults; give it or --lengths/--angles", args.name)
     if args.scans is not None:
         extra["scans"] = args.scans
+    if args.sets is not None:
+        from .bench.calibration import SETS as CALIBRATION_SETS
+        from .bench.multi_touch import SETS as SESSION_SETS
+
+        known = {"calibration": CALIBRATION_SETS, "multi-touch": SESSION_SETS}.get(args.name)
+        if known is None:
+            raise InputError("--sets applies to calibration and multi-touch only", args.name)
+        unknown = [x for x in args.sets if x not in known]
+        if unknown:
+            raise InputError(f"unknown set {unknown[0]!r}; {args.name} has {', '.join(known)}", "--sets")
+        extra["sets"] = tuple(args.sets)
     if args.paper_option:
         extra["options"] = dict(args.paper_option)
     if args.delta_only or args.lengths or args.angles:
@@ -353,6 +364,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--paper-option", type=_number_option, action="append", metavar="NAME=VALUE",
                    help="paper-fig11: an option of the paper method, one of its readings of the paper "
                         "(e.g. parabola_points=3, phi_step=5); repeatable")
+    p.add_argument("--sets", type=lambda text: text.split(","), metavar="SET,...",
+                   help="calibration (hard, p3-78) and multi-touch (hard-10, p3-78): which sets to run (default all)")
     p.add_argument("--out", metavar="DIR", help="output folder (default bench-out)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_bench)
