@@ -96,12 +96,12 @@ class Recognition:
 
     @property
     def ambiguous(self) -> bool:
-        """True when the data do not decide the model: :attr:`confidence` below
-        :data:`~tactrec.probability.AMBIGUOUS`, or the search ended on its budget (:attr:`settled`
-        false).  False when every model was rejected."""
+        """True exactly when :attr:`confidence` is below :data:`~tactrec.probability.AMBIGUOUS`
+        (INTERFACE.md); False when every model was rejected.  A search that ended on its budget
+        says so in :attr:`settled`."""
         if self.best is None:
             return False
-        return bool(self.confidence < AMBIGUOUS or not self.settled)
+        return bool(self.confidence < AMBIGUOUS)
 
     @property
     def located(self) -> bool:
