@@ -69,6 +69,8 @@ class Recognition:
         The method's work (``fast``: closest-point queries).
     depth : int
         How many steps of its schedule the method's search ran.
+    touch : Touch or None
+        The touch as recognition saw it (points, estimate, noise), for callers that go on with it.
     """
 
     best: str | None
@@ -80,6 +82,7 @@ class Recognition:
     settled: bool = True
     work: int = 0
     depth: int = 1
+    touch: Touch | None = None
 
     @functools.cached_property
     def probabilities(self) -> dict[str, float]:
@@ -286,7 +289,7 @@ class Recognizer:
         found = evidence([r.model for r in ok], [self._residuals(r, touch) for r in ok],
                          [len(c) for c in touch.joint_curves], touch.noise)
         return Recognition(best, ranking, touch.estimate, time.perf_counter() - start, self.method.name, found,
-                           outcome.settled, outcome.work, outcome.depth)
+                           outcome.settled, outcome.work, outcome.depth, touch)
 
     def _residuals(self, r: Registration, touch: Touch) -> np.ndarray:
         """The data's signed distances (data units) to the model of ``r`` under its pose."""

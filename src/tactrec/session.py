@@ -35,7 +35,6 @@ import time
 import numpy as np
 
 from .errors import InputError
-from .features import Touch
 from .io.session import SessionTouch, rigid_pose
 from .io.touch import TactileData
 from .linalg import transform
@@ -230,7 +229,7 @@ class Session:
         self.world.append(world)
         self.solo.append(rec)
         self.searches = [rec]
-        self.features.append(Touch.from_data(world, **self.recognizer.estimation))
+        self.features.append(rec.touch)
         self.result = self._joint_fit()
         best = self.result.hypothesis(self.result.best) if self.result.best else None
         if self.joint_search and context and (best is None or not all(
