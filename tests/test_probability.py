@@ -20,6 +20,19 @@ def small():
     return _small_meshes()
 
 
+def _seeded_results(entries, *, seed: int, per_model: int, noise: float):
+    """``(model name, Recognition)`` of ``per_model`` seeded noisy touches on each entry (41 points a
+    curve every 0.3 mm, planes 60 degrees apart, Gaussian noise, no outward side)."""
+    out = []
+    with Recognizer(entries) as recognizer:
+        for m_index, entry in enumerate(entries):
+            for i in range(per_model):
+                touch = simulate_random_touch(entry.model, rng=instance_rng(seed, m_index, i), points=41, spacing=0.3,
+                                              angle=60.0, noise=noise, noise_kind="gaussian", outward=False)
+                out.append((entry.name, recognizer.recognize(touch)))
+    return out
+
+
 def test_the_bootstrap_agrees_with_the_normal_theory_on_white_residuals():
     """Two models' distances to 123 points, white, each resampled on its own: the share of
     replicates the first wins matches Phi(difference of the means / the standard error of that
@@ -75,16 +88,11 @@ def test_confident_results_on_noisy_touches_are_right(small):
     shapes: every result with confidence >= 0.95 is right, at least 16 are that sure, and the
     accepted models' probabilities sum to 1."""
     sure = right = 0
-    with Recognizer(small) as recognizer:
-        for m_index, entry in enumerate(small):
-            for i in range(6):
-                touch = simulate_random_touch(entry.model, rng=instance_rng(31, m_index, i), points=41, spacing=0.3,
-                                              angle=60.0, noise=0.03, noise_kind="gaussian", outward=False)
-                result = recognizer.recognize(touch)
-                assert abs(sum(result.probabilities.values()) - 1.0) < 1e-9
-                if result.confidence >= 0.95:
-                    sure += 1
-                    right += result.best == entry.name
+    for name, result in _seeded_results(small, seed=31, per_model=6, noise=0.03):
+        assert abs(sum(result.probabilities.values()) - 1.0) < 1e-9
+        if result.confidence >= 0.95:
+            sure += 1
+            right += result.best == name
     assert sure >= 16 and right == sure
 
 
@@ -105,14 +113,8 @@ def test_confidence_on_twin_spheres_is_calibrated():
         mesh = trimesh.creation.icosphere(subdivisions=5, radius=r)
         model = MeshModel(mesh.vertices, mesh.faces, name=name, units="mm")
         entries.append(ModelEntry(model, CurvatureTable(model.table_samples())))
-    rows = []
-    with Recognizer(entries) as recognizer:
-        for m_index, entry in enumerate(entries):
-            for i in range(20):
-                touch = simulate_random_touch(entry.model, rng=instance_rng(41, m_index, i), points=41, spacing=0.3,
-                                              angle=60.0, noise=0.05, noise_kind="gaussian", outward=False)
-                result = recognizer.recognize(touch)
-                rows.append((result.best == entry.name, result.confidence))
+    rows = [(result.best == name, result.confidence)
+            for name, result in _seeded_results(entries, seed=41, per_model=20, noise=0.05)]
     right = np.array([r[0] for r in rows])
     conf = np.array([r[1] for r in rows])
     assert 0.55 <= right.mean() <= 0.95                                  # the touches do leave doubt

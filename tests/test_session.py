@@ -95,7 +95,7 @@ def test_next_proposes_a_reachable_place_every_leading_hypothesis_puts_on_the_su
             if proposal.contact is None:
                 assert max(result.probabilities.values()) >= 0.99
                 continue
-            c0 = session.world[0].contact if session.world[0].contact is not None else session.features[0].geometry.contact
+            c0 = session.features[0].geometry.contact if session.world[0].contact is None else session.world[0].contact
             assert np.linalg.norm(proposal.contact - c0) <= 20.0
             assert abs(np.linalg.norm(proposal.normal) - 1.0) < 1e-9 and proposal.gain > 0
             models = {e.name: e.model for e in small}

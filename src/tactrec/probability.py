@@ -66,7 +66,8 @@ def fit_standard_error(fit: float, points: int) -> float:
     return float(fit) * np.sqrt(np.pi / 2.0 - 1.0) / np.sqrt(points)
 
 
-def residuals(model, rotation: np.ndarray, translation: np.ndarray, points: np.ndarray, scale: float = 1.0) -> np.ndarray:
+def residuals(model, rotation: np.ndarray, translation: np.ndarray, points: np.ndarray,
+              scale: float = 1.0) -> np.ndarray:
     """Signed distances ``(m,)`` of data ``points (m, 3)`` (data units) to ``model`` under the pose
     ``model = scale * rotation @ data + translation``, in data units (positive outside)."""
     moved = scale * (np.asarray(points, dtype=np.float64) @ np.asarray(rotation).T) + np.asarray(translation)

@@ -173,18 +173,14 @@ def propose(session, *, radius: float, tolerance: float = 1.0, angle: float = 60
             angles = start + np.deg2rad(angle) * np.arange(3)
             directions = np.cos(angles)[:, None] * t1 + np.sin(angles)[:, None] * t2
             predicted = [_predicted(models[g.model], g, c, directions, points=points, spacing=spacing) for g in poses]
-            d = np.array([[0.0 if i == j else np.inf if x is None else
-                           float(np.mean(models[g.model].distance(_to_model(g, x)))) / g.scale
-                           for j, g in enumerate(poses)] for i, x in enumerate(predicted)])   # (i truth, j fitted)
-            ok = np.array([x is not None for x in predicted])
-            if not ok.all():                     # a touch every pose can take: the true surface reaches too
+            if any(x is None for x in predicted):    # a touch every pose can take: the true surface reaches too
                 continue
-            q = p
+            d = np.array([[0.0 if i == j else float(np.mean(models[g.model].distance(_to_model(g, x)))) / g.scale
+                           for j, g in enumerate(poses)] for i, x in enumerate(predicted)])   # (i truth, j fitted)
             with np.errstate(under="ignore"):
-                after = q[None, :] * np.exp(-0.5 * np.minimum((d / se) ** 2, 1400.0))
+                after = p[None, :] * np.exp(-0.5 * np.minimum((d / se) ** 2, 1400.0))
                 after = after / after.sum(axis=1, keepdims=True)
-                gain = _entropy(q @ by_model) - float(sum(q[i] * _entropy(after[i] @ by_model)
-                                                          for i in range(len(q)) if ok[i]))
+                gain = _entropy(p @ by_model) - float(sum(p[i] * _entropy(after[i] @ by_model) for i in range(len(p))))
             if best is None or gain > best[0]:
                 best = (gain, c, normal / np.linalg.norm(normal), directions)
     if best is None:

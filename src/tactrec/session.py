@@ -341,7 +341,7 @@ class Session:
                 a = f * model.size / step
                 dR = rotations_from_vectors((a * w)[None])[0]
                 R.append(dR @ best.rotation)
-                t.append(dR @ (best.translation - centre) + centre + a * (u + np.cross(w, centre)) - a * np.cross(w, centre))
+                t.append(dR @ (best.translation - centre) + centre + a * u)
         if not R:
             return self._distinct(best, np.empty((0, 3, 3)), np.empty((0, 3)))
         R, t, _ = _refine(model, np.array(R), np.array(t), x, FAMILY_ITERATIONS)

@@ -201,7 +201,8 @@ def run(*, out, instances: int = 10, seed: int = 0, jobs: int | None = None, qui
     for name, s in table["summary"].items():
         sure = "-" if s["sure_accuracy_percent"] is None else f"{s['sure_accuracy_percent']:.1f}%"
         lines.append(f"| {name} | {s['touches']} | {s['accuracy_percent']:.1f}% | {s['mean_confidence']:.3f} | "
-                     f"{s['ece']:.3f} | {s['ece_if_calibrated']:.3f} | {s['sure']} | {sure} | {s['median_seconds']:.2f} |")
+                     f"{s['ece']:.3f} | {s['ece_if_calibrated']:.3f} | {s['sure']} | {sure} | "
+                f"{s['median_seconds']:.2f} |")
     table["text"] = "\n".join(lines) + "\n"
     write_text_atomic(out / "calibration.md", table["text"])
     _plot(table, out / "calibration.png")
