@@ -577,5 +577,10 @@ def test_bench_paper_option_is_checked_before_any_work(tmp_path, capsys):
     bad(capsys, ["bench", "paper-fig11", "--paper-option", "phi_step", "--out", tmp_path / "bench"],
         "--paper-option", "expected NAME=VALUE")
     bad(capsys, ["bench", "kernels", "--paper-option", "phi_step=5", "--out", tmp_path / "bench"], "kernels",
-        "--paper-option applies to paper-fig11 only")
+        "--paper-option applies to paper-example, paper-table2, paper-table3, paper-table6, paper-fig11 only")
+    bad(capsys, ["bench", "paper-table3", "--method", "fast", "--paper-option", "parabola_points=3",
+                 "--out", tmp_path / "bench"], "fast", "--paper-option applies to the paper method only")
+    for name in ("paper-example", "paper-table2", "paper-table6"):
+        bad(capsys, ["bench", name, "--paper-option", "parabola_points=1", "--out", tmp_path / "bench"],
+            "--method", "parabola_points must be a whole number >= 2")
     assert files_in(tmp_path) == []

@@ -209,6 +209,10 @@ def cmd_simulate(args) -> int:
     return 0
 
 
+#: benchmarks that take the ``paper`` method's readings (``--paper-option``)
+PAPER_OPTION_BENCHMARKS = ("paper-example", "paper-table2", "paper-table3", "paper-table6", "paper-fig11")
+
+
 def cmd_bench(args) -> int:
     from .bench import BENCHMARKS
 
@@ -219,9 +223,11 @@ def cmd_bench(args) -> int:
     if args.scans is not None and args.name not in ("paper-fig11", "paper-table6", "paper-steps"):
         raise InputError("--scans applies to paper-fig11, paper-table6 and paper-steps only", args.name)
     for option, value in (("--delta-only", args.delta_only or None), ("--lengths", args.lengths),
-                          ("--angles", args.angles), ("--paper-option", args.paper_option)):
+                          ("--angles", args.angles)):
         if value is not None and args.name != "paper-fig11":
             raise InputError(f"{option} applies to paper-fig11 only", args.name)
+    if args.paper_option and args.name not in PAPER_OPTION_BENCHMARKS:
+        raise InputError(f"--paper-option applies to {', '.join(PAPER_OPTION_BENCHMARKS)} only", args.name)
     if args.delta_only and (args.lengths or args.angles):
         raise InputError("--delta-only leaves l and phi at the defaults; give it or --lengths/--angles", args.name)
     if args.scans is not None:
@@ -362,7 +368,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--angles", type=_positives, default=None, metavar="DEG,...",
                    help="paper-fig11: the plane separations phi of the phi sweep (default 10,20,30,40,50,60)")
     p.add_argument("--paper-option", type=_number_option, action="append", metavar="NAME=VALUE",
-                   help="paper-fig11: an option of the paper method, one of its readings of the paper "
+                   help="paper-example, paper-table2/3/6, paper-fig11: an option of the paper method, one of its "
+                        "readings of the paper "
                         "(e.g. parabola_points=3, phi_step=5); repeatable")
     p.add_argument("--sets", type=lambda text: text.split(","), metavar="SET,...",
                    help="calibration (hard, p3-78) and multi-touch (hard-10, p3-78): which sets to run (default all)")

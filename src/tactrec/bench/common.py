@@ -56,6 +56,19 @@ def scan_database(models: tuple[str, ...], scans: str = "shipped"):
     raise InputError(f"unknown scans {scans!r}; choose from {', '.join(SCANS)}")
 
 
+def paper_options(options: dict | None, method: str = "paper") -> tuple[tuple, str]:
+    """The ``paper`` method's reading options (:class:`tactrec.methods.paper.PaperConfig`), validated before
+    any work, as a sorted tuple, and the suffix they add to a benchmark's output name."""
+    from ..errors import InputError
+    from ..methods.paper import PaperConfig
+
+    items = tuple(sorted((k, v) for k, v in (options or {}).items() if v is not None))
+    if items and method != "paper":
+        raise InputError("--paper-option applies to the paper method only", method)
+    PaperConfig.from_options("paper", dict(items))
+    return items, "".join(f"-{k.replace('_', '-')}{v:g}" for k, v in items)
+
+
 def paper_values() -> dict:
     """The paper's published numbers (``paper_values.json``)."""
     return json.loads((resources.files("tactrec.bench") / "paper_values.json").read_text(encoding="utf-8"))

@@ -15,6 +15,8 @@ of the wrong models' errors over the right one's.
 
 Curve spacing is not given in the paper; we use 0.02 (curves 1.2 long on
 surfaces about 2 across), adjacent planes 60 degrees apart, ``outward`` given.
+``options`` are the ``paper`` method's readings (``parabola_points``, ...);
+the output's name lists them.
 """
 
 from __future__ import annotations
@@ -28,7 +30,7 @@ from ..database import build_entries
 from ..recognition import recognize
 from ..simulation import simulate_random_touch
 from ..surfaces import BUILTIN_SETS
-from .common import default_jobs, instance_rng, paper_values, run_parallel, write_json
+from .common import default_jobs, instance_rng, paper_options, paper_values, run_parallel, write_json
 
 __all__ = ["run_table2", "run_table3", "CONFIG"]
 
@@ -47,14 +49,14 @@ def _database():
 
 def _touch(task):
     """Simulate one instance and recognise it (against one or all surfaces)."""
-    surface_index, instance, seed, method, only_own = task
+    surface_index, instance, seed, method, only_own, options = task
     db = _database()
     entry = db.entries[surface_index]
     rng = instance_rng(seed, surface_index, instance)
     data = simulate_random_touch(entry.model, rng=rng, **CONFIG)
     entries = [entry] if only_own else db.entries
     start = time.perf_counter()
-    result = recognize(data, entries, method=method)
+    result = recognize(data, entries, method=method, **dict(options))
     seconds = time.perf_counter() - start
     truth = data.meta["truth"]
     own = next(r for r in result.ranking if r.model == entry.name)
@@ -78,9 +80,14 @@ def _touch(task):
     return record
 
 
-def _run(*, instances: int, seed: int, jobs: int | None, quiet: bool, method: str, only_own: bool, desc: str):
-    tasks = [(s, i, seed, method, only_own) for s in range(len(SURFACES)) for i in range(instances)]
+def _run(*, instances: int, seed: int, jobs: int | None, quiet: bool, method: str, only_own: bool, desc: str,
+         options: tuple = ()):
+    tasks = [(s, i, seed, method, only_own, options) for s in range(len(SURFACES)) for i in range(instances)]
     return run_parallel(_touch, tasks, jobs=jobs or default_jobs(), quiet=quiet, desc=desc)
+
+
+def _readings(options) -> str:
+    return "".join(f"; {k} = {v:g}" for k, v in options)
 
 
 def _fig8(records, out: Path, name: str) -> Path:
@@ -99,11 +106,13 @@ def _fig8(records, out: Path, name: str) -> Path:
 
 
 def run_table2(*, out, instances: int = 10, seed: int = 0, jobs: int | None = None, quiet: bool = False,
-               method: str = "paper") -> dict:
+               method: str = "paper", options: dict | None = None) -> dict:
     """P1: localisation error per surface (paper Table 2 and Fig. 8)."""
     out = Path(out)
+    options, suffix = paper_options(options, method)
+    stem = f"paper-table2{suffix}"
     records = _run(instances=instances, seed=seed, jobs=jobs, quiet=quiet, method=method, only_own=True,
-                   desc="paper-table2")
+                   desc=stem, options=options)
     paper = paper_values()["table2"]
     rows = {}
     for name in SURFACES:
@@ -113,12 +122,13 @@ def run_table2(*, out, instances: int = 10, seed: int = 0, jobs: int | None = No
         rows[name] = {"min": float(errs.min()), "max": float(errs.max()), "mean": float(errs.mean()),
                       "failed": int(np.sum(~np.isfinite(errs))), "median_seconds": float(np.median(times)),
                       "paper": paper[name]}
-    table = {"benchmark": "paper-table2", "method": method, "instances": instances, "seed": seed,
+    table = {"benchmark": stem, "method": method, "options": dict(options), "instances": instances, "seed": seed,
              "config": CONFIG, "surfaces": rows, "records": records}
     out.mkdir(parents=True, exist_ok=True)
-    write_json(out / "paper-table2.json", table)
-    table["plots"] = [str(_fig8(records, out, "paper-table2"))]
-    lines = [f"P1 / Table 2: |p - p*| over {instances} instances per surface (method {method}, seed {seed})",
+    write_json(out / f"{stem}.json", table)
+    table["plots"] = [str(_fig8(records, out, stem))]
+    lines = [f"P1 / Table 2: |p - p*| over {instances} instances per surface "
+             f"(method {method}{_readings(options)}, seed {seed})",
              f"{'surface':22s} {'min':>8s} {'max':>8s} {'mean':>8s}   paper: {'min':>7s} {'max':>7s} {'mean':>7s}"
              f"  {'s/touch':>7s}"]
     for name, r in rows.items():
@@ -130,11 +140,13 @@ def run_table2(*, out, instances: int = 10, seed: int = 0, jobs: int | None = No
 
 
 def run_table3(*, out, instances: int = 10, seed: int = 0, jobs: int | None = None, quiet: bool = False,
-               method: str = "paper") -> dict:
+               method: str = "paper", options: dict | None = None) -> dict:
     """P2: recognition among the four surfaces (paper Table 3)."""
     out = Path(out)
+    options, suffix = paper_options(options, method)
+    stem = f"paper-table3{suffix}"
     records = _run(instances=instances, seed=seed, jobs=jobs, quiet=quiet, method=method, only_own=False,
-                   desc="paper-table3")
+                   desc=stem, options=options)
     paper = paper_values()["table3"]
     rows = {}
     excess = []
@@ -157,17 +169,17 @@ def run_table3(*, out, instances: int = 10, seed: int = 0, jobs: int | None = No
                       "paper": paper[name]}
     total = sum(r["correct"] for r in rows.values())
     n = sum(r["instances"] for r in rows.values())
-    table = {"benchmark": "paper-table3", "method": method, "instances": instances, "seed": seed,
+    table = {"benchmark": stem, "method": method, "options": dict(options), "instances": instances, "seed": seed,
              "config": CONFIG, "surfaces": rows, "correct": total, "total": n,
              "accuracy": total / n if n else 0.0,
              "wrong_model_error_excess_percent": float(np.mean(excess)) if excess else None,
              "median_seconds": float(np.median([r["seconds"] for r in records])),
              "records": records}
     out.mkdir(parents=True, exist_ok=True)
-    write_json(out / "paper-table3.json", table)
-    table["plots"] = [str(_fig8(records, out, "paper-table3"))]
+    write_json(out / f"{stem}.json", table)
+    table["plots"] = [str(_fig8(records, out, stem))]
     lines = [f"P2 / Table 3: recognition among {len(SURFACES)} surfaces, {instances} instances each "
-             f"(method {method}, seed {seed})",
+             f"(method {method}{_readings(options)}, seed {seed})",
              f"{'surface':22s} {'correct':>8s} {'lookup':>7s} {'search':>7s}   paper: {'lookup':>6s} {'search':>6s}"
              f"  {'s/touch':>7s}"]
     for name, r in rows.items():

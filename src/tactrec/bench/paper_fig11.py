@@ -31,8 +31,8 @@ from ..methods.paper import PaperConfig
 from ..registration import mesh_paper
 from ..simulation import simulate_touch, spread_vertices
 from ..surfaces import BUILTIN_SETS
-from .common import (CORE_SOURCES, SCANS, default_jobs, instance_rng, run_parallel, saved_record, scan_database,
-                     sources_hash, write_json)
+from .common import (CORE_SOURCES, SCANS, default_jobs, instance_rng, paper_options, run_parallel, saved_record,
+                     scan_database, sources_hash, write_json)
 
 __all__ = ["run_fig11", "SWEEPS", "DEFAULTS", "p3_touch"]
 
@@ -165,11 +165,9 @@ def run_fig11(*, out, instances: int = 10, seed: int = 0, jobs: int | None = Non
     ``options`` (its readings; the output's name lists them)."""
     if scans not in SCANS:
         raise InputError(f"unknown scans {scans!r}; choose from {', '.join(SCANS)}")
-    options = tuple(sorted((k, v) for k, v in (options or {}).items() if v is not None))
-    PaperConfig.from_options("paper", dict(options))            # a bad option fails before any work
+    options, suffix = paper_options(options)
     out = Path(out)
-    name = "paper-fig11" if scans == "shipped" else f"paper-fig11-{scans}"
-    name += "".join(f"-{k.replace('_', '-')}{v:g}" for k, v in options)
+    name = ("paper-fig11" if scans == "shipped" else f"paper-fig11-{scans}") + suffix
     models = tuple(models or BUILTIN_SETS["paper-fig11"])
     sweeps = sweeps or SWEEPS
     configs = {(DEFAULTS["length"], DEFAULTS["angle"]): sorted(set(sweeps["delta"]) | {DEFAULTS["delta"]})}

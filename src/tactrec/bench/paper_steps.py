@@ -8,9 +8,9 @@ A recognition by the paper's mesh method can fail at three steps:
    table row near the touch, or no walk starts there.  The paper fits "a
    parabola to a few data points on the curve and around p"; how few is
    not said, so the readings are the parabola over ``w`` points each side
-   of ``p`` (:data:`WINDOWS`) and this package's default (a cubic over the
+   of ``p`` (:data:`WINDOWS`), this package's default (a cubic over the
    widest window the curve's own noise allows, :func:`tactrec.estimation.
-   fit_curve`).
+   fit_curve`) and the plain parabola over that same window.
 2. **The superposition error at the truth** (Section 5.3.1, eq. 15): at
    the touched vertex, with the best rotation ``phi``, the curves must fit
    better than anywhere else.  The paper scans ``phi`` for closed-form
@@ -55,7 +55,7 @@ NO_FIT = 1.0
 
 
 def _readings() -> dict:
-    out = {"default": {}}
+    out = {"default": {}, "parabola, window from the noise": {"window": "auto", "degree": 2}}
     for w in WINDOWS:
         out["parabola, all points" if w is None else f"parabola, {w} each side"] = {"window": w, "degree": 2}
     return out

@@ -24,6 +24,8 @@ side is given.  With several instances, a cell is the median.
 ``scans="paper-like"`` runs on the scans scaled to 60-95 mm and refined to
 the paper's resolution (:func:`tactrec.surfaces.paper_like.paper_like`), as
 the paper's own scans were; ``"shipped"`` on the YCB scans as they come.
+``options`` are the ``paper`` method's readings (``parabola_points``, ...);
+the output's name lists them.
 """
 
 from __future__ import annotations
@@ -35,11 +37,12 @@ import numpy as np
 from ..errors import InputError
 from ..estimation import estimate
 from ..io.atomic import write_text_atomic
+from ..methods.paper import PaperConfig
 from ..registration import mesh_fast, mesh_paper
 from ..simulation import simulate_touch, spread_vertices
 from ..surfaces import BUILTIN_SETS
-from .common import (SCANS, error_cell, errors_on_every_model, instance_rng, run_parallel, scan_database,
-                     within_noise, write_json)
+from .common import (SCANS, error_cell, errors_on_every_model, instance_rng, paper_options, run_parallel,
+                     scan_database, within_noise, write_json)
 
 __all__ = ["run", "PAPER", "CONFIG", "DELTA"]
 
@@ -59,7 +62,7 @@ def noise() -> float:
 
 
 def _touch(task) -> dict:
-    models, m_index, instance, seed, scans = task
+    models, m_index, instance, seed, scans, readings = task
     db = scan_database(models, scans)
     entry = db.entries[m_index]
     vertices = spread_vertices(entry.model, instance + 1, rings=15, rng=instance_rng(seed, m_index))
@@ -71,7 +74,7 @@ def _touch(task) -> dict:
     _, _, refined, _ = mesh_fast.refine(entry.model, np.asarray(truth["rotation"])[None],
                                         np.asarray(truth["translation"])[None], data.points, iterations=20)
     try:
-        geometry = estimate(data)
+        geometry = PaperConfig.from_options("paper", dict(readings)).geometry(data) or estimate(data)
     except InputError as exc:                    # counted as a miss of both methods, not the end of the run
         return {"object": entry.name, "instance": instance, "site": site, "failed": str(exc),
                 "truth": {"paper": None, "fast": float(refined[0])},
@@ -80,21 +83,22 @@ def _touch(task) -> dict:
     out = {"object": entry.name, "instance": instance, "site": site, "methods": {}, "points": len(data.points),
            "truth": {"paper": float(at_touch), "fast": float(refined[0])}}
     for method in METHODS:
-        options = {"delta": DELTA} if method == "paper" else {}
+        options = {"delta": DELTA, **dict(readings)} if method == "paper" else {}
         out["methods"][method] = errors_on_every_model(data, db.entries, method=method, **options)
     return out
 
 
 def run(*, out, instances: int = 1, seed: int = 0, jobs: int | None = None, quiet: bool = False,
-        models: tuple[str, ...] = MODELS, scans: str = "shipped", **_ignored) -> dict:
+        models: tuple[str, ...] = MODELS, scans: str = "shipped", options: dict | None = None, **_ignored) -> dict:
     """Table 6: every object's touches registered on every scan (as shipped or paper-like, ``scans``)
     by both methods; writes ``paper-table6.json`` and ``.md`` (``paper-table6-paper-like.*``)."""
     if scans not in SCANS:
         raise InputError(f"unknown scans {scans!r}; choose from {', '.join(SCANS)}")
     out = Path(out)
-    name = "paper-table6" if scans == "shipped" else f"paper-table6-{scans}"
+    options, suffix = paper_options(options)
+    name = ("paper-table6" if scans == "shipped" else f"paper-table6-{scans}") + suffix
     models = tuple(models)
-    tasks = [(models, m, i, seed, scans) for m in range(len(models)) for i in range(instances)]
+    tasks = [(models, m, i, seed, scans, options) for m in range(len(models)) for i in range(instances)]
     records = run_parallel(_touch, tasks, jobs=jobs or 1, quiet=quiet, desc="paper-table6")
     summary = {}
     for method in METHODS:
@@ -112,8 +116,8 @@ def run(*, out, instances: int = 1, seed: int = 0, jobs: int | None = None, quie
                            "misses": {w: misses.count(w) for w in sorted(set(misses))},
                            "nc_cells": sum(v is None for row in cells.values() for v in row.values()),
                            "seconds": {"median": float(np.median(seconds)), "max": float(np.max(seconds))}}
-    table = {"benchmark": name, "scans": scans, "instances": instances, "seed": seed, "models": list(models),
-             "config": CONFIG, "delta": DELTA, "noise": noise(), "paper": PAPER, "summary": summary,
+    table = {"benchmark": name, "scans": scans, "options": dict(options), "instances": instances, "seed": seed,
+             "models": list(models), "config": CONFIG, "delta": DELTA, "noise": noise(), "paper": PAPER, "summary": summary,
              "records": records}
     write_json(out / f"{name}.json", table)
     table["text"] = _markdown(table)
