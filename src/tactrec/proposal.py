@@ -4,28 +4,36 @@ The hypotheses are the session's models, each at its joint pose
 (:mod:`tactrec.session`), with their probabilities.  The *leading* ones are
 the most probable, until they hold :data:`MASS` of the probability (at most
 :data:`LEADING`).  With one left there is nothing to separate and nothing is
-proposed.
+proposed.  Where no place suits every leading hypothesis (below), the least
+probable is left out until one does, down to the two most probable; the
+proposal lists the hypotheses it separates.
 
-Candidates.  Places on the leading hypotheses' surfaces (random sites of each
-model, carried into the world by its pose) that every leading hypothesis puts
-on the object's surface (within ``tolerance`` of its model, under one of its
-poses), that lie within ``radius`` of an earlier touch's contact, and where
-every pose's surface takes the whole touch: places the sensor can reach and
-every hypothesis agrees it will meet and can trace.
+Candidates.  Places on the leading hypotheses' surfaces within ``radius`` of
+an earlier touch's contact (``candidates`` random sites of each model in that
+reach, carried into the world by its pose) that every leading hypothesis puts
+on the object's surface (within ``tolerance`` of its model, under its pose)
+and whose surface, under one of its poses, takes the whole touch:
+places the sensor can reach and every hypothesis agrees it will meet and can
+trace.  A pose under which the touch would leave the surface is not a truth
+for that place.
 
 Gain.  At a candidate, each hypothesis predicts the touch the sensor would
 record: three curves through the place, in the same world directions, as the
 session's touches are (their points per curve and spacing), noise-free.  If
-hypothesis ``i`` is true, hypothesis ``j`` would fit that touch at mean
-distance ``d_ij``: ``i``'s predicted points measured against ``j``'s surface
-once ``j``'s pose is refitted to them and the earlier touches together (a
-pose the earlier touches leave free, along a cylinder or over a flat patch,
-slides to absorb what it can).  It would be told apart from ``i`` by
-``z_ij = d_ij / SE``, ``SE`` the
-standard error of a fit under the session's noise (:mod:`tactrec.probability`).
-The posterior after the touch is then ``p_j exp(-z_ij^2 / 2)`` normalised,
-and the expected gain is the entropy now less its expectation after, in bits.
-The candidate of largest gain is proposed.
+hypothesis ``i`` is true and model ``M`` is fitted, ``M``'s pose is refitted
+to the earlier touches and ``i``'s predicted touch together, from each of
+its poses: a pose the earlier touches leave free, along a cylinder or over
+a flat patch, slides to absorb what it can.  The refit is one Gauss-Newton
+step on the point-to-plane residuals (:func:`_refit_rss`): with ``r`` the
+predicted points' signed distances to ``M`` and ``J`` their pose Jacobian,
+and ``H0 = J0^T J0`` the earlier touches' (whose residuals are at their
+optimum), the least sum of squares is ``r^T r - r^T J (H0 + J^T J)^-1 J^T r``.
+Under Gaussian noise of the session's sigma (the larger of the touches' own
+noise and the best joint fit's), model ``M``'s likelihood after the touch
+falls by ``exp(-RSS_iM / 2 sigma^2)``, its own model's not at all.  The
+expected gain is the entropy of the models' probabilities now less its
+expectation after the touch, in bits.  The candidate of largest gain is
+proposed.
 """
 
 from __future__ import annotations
@@ -33,8 +41,9 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+from scipy.special import erf
 
-from .probability import fit_standard_error, noise_fit
+from .probability import planes
 from .simulation import simulate_world_touch
 
 __all__ = ["Proposal", "propose", "MASS", "LEADING"]
@@ -57,7 +66,8 @@ class Proposal:
     gain : float
         Expected information gain, bits.
     hypotheses : list of (str, float)
-        The leading hypotheses and their probabilities.
+        The hypotheses the proposal separates (the leading ones, or the most probable of them that
+        some place suits) and their probabilities.
     reason : str
         Why nothing is proposed, when nothing is.
     """
@@ -104,6 +114,81 @@ def _predicted(model, h, contact_w: np.ndarray, directions_w: np.ndarray, *, poi
     return data.transformed(*pose).points
 
 
+#: a hypothesis' surface is drawn at random up to this many times ``candidates`` for reachable places
+DRAWS = 50
+
+
+def _reachable(model, h, contacts: np.ndarray, radius: float, count: int, rng) -> list:
+    """Up to ``count`` random places on ``model``'s surface that hypothesis ``h`` puts within ``radius``
+    of an earlier contact (world ``contacts (N, 3)``): ``(SiteFrame, world point)`` pairs, drawn
+    uniformly over the surface in batches until there are enough or :data:`DRAWS` x ``count`` were
+    drawn."""
+    out, drawn = [], 0
+    while len(out) < count and drawn < DRAWS * count:
+        for site in model.random_sites(4 * count, rng=rng):
+            frame = model.site_frame(site)
+            c = _to_world(h, frame.point)
+            if np.min(np.linalg.norm(contacts - c, axis=1)) <= radius:
+                out.append((frame, c))
+                if len(out) >= count:
+                    break
+        drawn += 4 * count
+    return out
+
+
+def _jacobian(model, moved: np.ndarray):
+    """Signed distances ``(m,)`` of model-frame points ``moved (m, 3)`` and their pose Jacobian
+    ``(m, 6)``: the change of each distance under a small turn ``w`` (per model size) and shift
+    ``u`` of the model frame, ``(m x n) . w + n . u``."""
+    d, n = planes(model, moved)
+    return d, np.concatenate([np.cross(moved, n) / model.size, n], axis=1)
+
+
+def _information(model, pose: np.ndarray, scale: float, x_world: np.ndarray) -> np.ndarray:
+    """``J0^T J0 (6, 6)`` of world points ``x_world (m, 3)`` under ``pose (3, 4)``, model units."""
+    _, J = _jacobian(model, scale * x_world @ pose[:, :3].T + pose[:, 3])
+    return np.einsum("mi,mj->ij", J, J)
+
+
+def _refit(model, pose: np.ndarray, scale: float, H0: np.ndarray, x_world: np.ndarray):
+    """Each of ``n`` predicted touches ``x_world (n, k, 3)`` against ``model`` once the pose
+    ``(3, 4)`` is refitted to that touch and the earlier touches (information ``H0 (6, 6)``)
+    together, by one Gauss-Newton step (module text): the touch's signed distances after the step
+    ``(n, k)`` and the sum of squares the step adds to the earlier touches' ``(n,)``, world units."""
+    n, k = x_world.shape[:2]
+    r, J = _jacobian(model, (scale * x_world.reshape(-1, 3) @ pose[:, :3].T + pose[:, 3]))
+    r, J = r.reshape(n, k), J.reshape(n, k, 6)
+    H = H0[None] + np.einsum("nmi,nmj->nij", J, J)
+    b = np.einsum("nmi,nm->ni", J, r)
+    ridge = 1e-12 * np.maximum(np.trace(H, axis1=1, axis2=2), 1e-300)
+    step = -np.linalg.solve(H + ridge[:, None, None] * np.eye(6), b[..., None])[..., 0]
+    after = r + np.einsum("nmi,ni->nm", J, step)
+    return after / scale, np.einsum("ni,ij,nj->n", step, H0, step) / scale ** 2
+
+
+def _excess(offset: np.ndarray, sigma: float) -> np.ndarray:
+    """What a point ``offset`` from the surface adds to a fit's mean distance under Gaussian noise of
+    ``sigma``: the folded normal's mean less the half-normal's (quadratic below ``sigma``, then
+    linear)."""
+    a = np.abs(offset)
+    with np.errstate(under="ignore"):
+        return sigma * np.sqrt(2.0 / np.pi) * (np.exp(-0.5 * (a / sigma) ** 2) - 1.0) + a * erf(a / (sigma * np.sqrt(2.0)))
+
+
+def _separation(model, h, H0: np.ndarray, predicted: np.ndarray, sigma: float, earlier: int) -> np.ndarray:
+    """How many standard errors ``(n,)`` the session's mean distance on ``model``, refitted from
+    pose ``h`` (module text), would exceed the truth's if each of the ``predicted (n, k, 3)``
+    touches were added: the points' excess distances (:func:`_excess`; the earlier touches'
+    ``earlier`` points share the sum of squares the refit adds to them) over the spread of a
+    difference of two fits' mean distances over all the points."""
+    pose = np.concatenate([h.rotation, h.translation[:, None]], axis=1)
+    offsets, added = _refit(model, pose, h.scale, H0, predicted)
+    total = offsets.shape[1] + earlier
+    excess = _excess(offsets, sigma).sum(axis=1) + earlier * _excess(np.sqrt(added / earlier), sigma)
+    spread = sigma * np.sqrt(1.0 - 2.0 / np.pi)                      # a half-normal distance's
+    return excess / (spread * np.sqrt(2.0 * total))
+
+
 def propose(session, *, radius: float, tolerance: float = 1.0, angle: float = 60.0, candidates: int = 48,
             rng=None) -> Proposal:
     """The next touch for ``session`` (a :class:`~tactrec.session.Session` with at least one touch).
@@ -117,7 +202,7 @@ def propose(session, *, radius: float, tolerance: float = 1.0, angle: float = 60
     angle : float
         Degrees between the proposed curves' directions.
     candidates : int
-        Places tried on each leading hypothesis' surface.
+        Places within reach tried on each leading hypothesis' surface.
     rng : seed or Generator
     """
     result = session.result
@@ -135,18 +220,36 @@ def propose(session, *, radius: float, tolerance: float = 1.0, angle: float = 60
     hyps = [(h.model, probs.get(h.model, 0.0)) for h in leading]
     if len(leading) < 2:
         return Proposal(None, None, None, 0.0, hyps, "one hypothesis holds the probability: nothing to separate")
+    for n in range(len(leading), 1, -1):
+        # the most probable hypotheses that some reachable place suits
+        best = _best_place(session, leading[:n], np.array([w for _, w in hyps[:n]]), radius=radius,
+                           tolerance=tolerance, angle=angle, candidates=candidates, rng=rng)
+        if best is not None:
+            return Proposal(best[1], best[2], best[3], best[0], hyps[:n])
+    return Proposal(None, None, None, 0.0, hyps, f"no place within {radius:g} of the touches that the two leading "
+                    f"hypotheses both put on the surface (tolerance {tolerance:g})")
+
+
+def _best_place(session, leading: list, weights: np.ndarray, *, radius: float, tolerance: float, angle: float,
+                candidates: int, rng):
+    """The candidate of largest expected gain among ``leading`` hypotheses (probabilities ``weights``):
+    ``(gain, contact, normal, directions)``, or None where no place qualifies."""
+    result = session.result
     models = {e.name: e.model for e in session.recognizer.models}
-    weights = np.array([w for _, w in hyps])
     weights = weights / weights.sum()
-    # the hypotheses told apart: each leading model at each of its poses, sharing its probability
-    poses, p, owner = [], [], []
+    use = [i for i in range(len(session.features)) if i not in result.slipped]
+    x_world = np.concatenate([session.features[i].points for i in use])
+    # each leading model at each of its poses; the poses share the model's probability as truths and
+    # are the starts of its refits
+    poses, p, owner, info = [], [], [], []
     for k, (h, w) in enumerate(zip(leading, weights)):
         family = session.family(h.model)
         for pose in family:
             poses.append(dataclasses.replace(h, rotation=pose[:, :3], translation=pose[:, 3]))
             p.append(w / len(family))
             owner.append(k)
-    p = np.array(p)
+            info.append(_information(models[h.model], pose, h.scale, x_world))
+    p, owner = np.array(p), np.array(owner)
     by_model = np.eye(len(leading))[owner]                                       # (poses, models)
     contacts = np.array([w.contact if w.contact is not None else f.geometry.contact
                          for w, f in zip(session.world, session.features)])
@@ -154,17 +257,13 @@ def propose(session, *, radius: float, tolerance: float = 1.0, angle: float = 60
     points = int(np.median(sizes))
     spacing = float(np.median([w.spacing for w in session.world]))
     noise = float(np.median([f.noise for f in session.features]))
-    se = fit_standard_error(max(noise_fit(noise), 1e-3 * spacing), 3 * points)
+    sigma = max(noise, leading[0].error * np.sqrt(np.pi / 2), 1e-3 * spacing)
+    entropy = _entropy(weights)
     best = None
     for h in leading:
         model = models[h.model]
-        for site in model.random_sites(candidates, rng=rng):
-            frame = model.site_frame(site)
-            c = _to_world(h, frame.point)
-            if np.min(np.linalg.norm(contacts - c, axis=1)) > radius:
-                continue
-            if not all(any(models[g.model].distance(_to_model(g, c)[None])[0] / g.scale <= tolerance
-                           for g in poses if g.model == m.model) for m in leading):
+        for frame, c in _reachable(model, h, contacts, radius, candidates, rng):
+            if not all(models[m.model].distance(_to_model(m, c)[None])[0] / m.scale <= tolerance for m in leading):
                 continue
             normal = frame.normal @ h.rotation                                        # model -> world direction
             start = rng.uniform(0.0, 2 * np.pi)
@@ -173,17 +272,21 @@ def propose(session, *, radius: float, tolerance: float = 1.0, angle: float = 60
             angles = start + np.deg2rad(angle) * np.arange(3)
             directions = np.cos(angles)[:, None] * t1 + np.sin(angles)[:, None] * t2
             predicted = [_predicted(models[g.model], g, c, directions, points=points, spacing=spacing) for g in poses]
-            if any(x is None for x in predicted):    # a touch every pose can take: the true surface reaches too
+            takes = np.array([x is not None for x in predicted])
+            if not np.all(by_model[takes].any(axis=0)):   # every model has a pose whose surface takes the touch
                 continue
-            d = np.array([[0.0 if i == j else float(np.mean(models[g.model].distance(_to_model(g, x)))) / g.scale
-                           for j, g in enumerate(poses)] for i, x in enumerate(predicted)])   # (i truth, j fitted)
+            # the truths: the poses that take it, each model keeping its probability
+            truth = p * takes / (by_model @ (by_model[takes].sum(axis=0) / by_model.sum(axis=0)))
+            stacked = np.array([x if x is not None else predicted[np.argmax(takes)] for x in predicted])
+            z = np.zeros((len(poses), len(leading)))                    # (truth pose, model fitted)
+            for k in range(len(leading)):
+                others = (owner != k) & takes
+                z[others, k] = np.min([_separation(models[poses[j].model], poses[j], info[j], stacked[others],
+                                                   sigma, len(x_world)) for j in np.nonzero(owner == k)[0]], axis=0)
             with np.errstate(under="ignore"):
-                after = p[None, :] * np.exp(-0.5 * np.minimum((d / se) ** 2, 1400.0))
+                after = weights[None, :] * np.exp(-0.5 * np.minimum(z * z, 1400.0))
                 after = after / after.sum(axis=1, keepdims=True)
-                gain = _entropy(p @ by_model) - float(sum(p[i] * _entropy(after[i] @ by_model) for i in range(len(p))))
+            gain = entropy - float(sum(truth[i] * _entropy(after[i]) for i in np.nonzero(takes)[0]))
             if best is None or gain > best[0]:
                 best = (gain, c, normal / np.linalg.norm(normal), directions)
-    if best is None:
-        return Proposal(None, None, None, 0.0, hyps, f"no place within {radius:g} of the touches that every "
-                        f"leading hypothesis puts on the surface (tolerance {tolerance:g})")
-    return Proposal(best[1], best[2], best[3], best[0], hyps)
+    return best

@@ -38,7 +38,7 @@ from .errors import InputError
 from .io.session import SessionTouch, rigid_pose
 from .io.touch import TactileData
 from .linalg import transform
-from .probability import AMBIGUOUS, Evidence, evidence, fit_standard_error, noise_fit, residuals
+from .probability import AMBIGUOUS, Evidence, evidence, fit_standard_error, noise_fit, planes, residuals
 
 
 __all__ = ["Session", "SessionResult", "Hypothesis", "CONSISTENT_SE"]
@@ -170,12 +170,7 @@ def _refine(model, R: np.ndarray, t: np.ndarray, x: np.ndarray, iterations: int)
 
 def _normals(model, points: np.ndarray) -> np.ndarray:
     """Unit normals ``(m, 3)`` of the planes ``points (m, 3)`` (model units) are measured against."""
-    if model.kind == "mesh":
-        from .registration.mesh_fast import _planes
-
-        return _planes(model, points[None])[1][0]
-    g = model.implicit(points, order=1)[..., 1:]
-    return g / np.maximum(np.linalg.norm(g, axis=-1, keepdims=True), 1e-300)
+    return planes(model, points)[1]
 
 
 def _fit_error(touch, registration) -> float:
@@ -334,14 +329,18 @@ class Session:
         R, t = [], []
         for k in np.nonzero(values < FREE * values[-1])[0]:
             w, u = vectors[:3, k], vectors[3:, k]
-            step = np.linalg.norm(np.cross(w, centre) + u)
+            step = np.linalg.norm(np.cross(w, centre) + u)          # the data centre's speed
             if step <= 0:
                 continue
+            # the screw the twist (w, u) generates: a turn about the axis through q, a slide along it
+            turning = np.linalg.norm(w) * model.size > 1e-6 * np.linalg.norm(u)
+            q = np.cross(w, u) / (w @ w) if turning else np.zeros(3)
+            slide = (w @ u) / (w @ w) * w if turning else u
             for f in (-0.5, -0.25, 0.25, 0.5):
                 a = f * model.size / step
-                dR = rotations_from_vectors((a * w)[None])[0]
+                dR = rotations_from_vectors((a * w)[None])[0] if turning else np.eye(3)
                 R.append(dR @ best.rotation)
-                t.append(dR @ (best.translation - centre) + centre + a * u)
+                t.append(dR @ (best.translation - q) + q + a * slide)
         if not R:
             return self._distinct(best, np.empty((0, 3, 3)), np.empty((0, 3)))
         R, t, _ = _refine(model, np.array(R), np.array(t), x, FAMILY_ITERATIONS)
