@@ -169,3 +169,35 @@ def test_recognize_and_next_on_a_session_file(tmp_path, capsys):
     assert main(["next", str(path), "--models", "closed-form", "--json", "--quiet"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert {"contact", "gain", "hypotheses"} <= set(out)
+
+
+def test_next_measures_a_difference_after_refitting_the_pose_the_touches_leave_free():
+    """The separation ``next`` weighs (tactrec.proposal): earlier points on a box's top face pin its
+    height and tilt but leave it free to slide in the plane.  A predicted touch on a side face 2 mm
+    out is absorbed by the slide (under one standard error); the same touch with the earlier
+    touches pinning every motion, and a touch on the top face 1 mm up, are told apart by tens of
+    standard errors; the excess distance is the folded normal's mean less the half-normal's."""
+    import trimesh
+    from scipy import stats
+
+    from tactrec.proposal import _excess, _information, _separation
+    from tactrec.session import Hypothesis
+    from tactrec.surfaces.mesh import MeshModel
+
+    box = trimesh.creation.box(extents=(40.0, 30.0, 20.0)).subdivide().subdivide().subdivide()
+    model = MeshModel(box.vertices, box.faces, name="box", units="mm")
+    g = np.linspace(-5.0, 5.0, 11)
+    earlier = np.array([[x, y, 10.0] for x in g for y in g])                    # on the top face
+    pose = np.concatenate([np.eye(3), np.zeros((3, 1))], axis=1)
+    h = Hypothesis("box", np.eye(3), np.zeros(3), 1.0, 0.0, np.zeros(1), (True,))
+    H0 = _information(model, pose, 1.0, earlier)
+    z = np.linspace(-6.0, 6.0, 41)
+    side = np.stack([np.full_like(z, 22.0), np.linspace(-3.0, 3.0, 41), z], axis=1)      # the side face, 2 mm out
+    top = np.stack([np.linspace(-8.0, 8.0, 41), np.linspace(-4.0, 4.0, 41), np.full_like(z, 11.0)], axis=1)
+    sigma = 0.05
+    slid, lifted = _separation(model, h, H0, np.stack([side, top]), sigma, len(earlier))
+    pinned = _separation(model, h, 1e12 * np.eye(6), side[None], sigma, len(earlier))[0]
+    assert slid < 1.0 and lifted > 20.0 and pinned > 20.0
+    a = np.array([0.0, 0.3, 1.0, 4.0]) * sigma
+    folded = np.array([stats.foldnorm.mean(x / sigma, scale=sigma) for x in a])
+    assert np.allclose(_excess(a, sigma), folded - sigma * np.sqrt(2 / np.pi), atol=1e-12)

@@ -24,16 +24,20 @@ hypothesis ``i`` is true and model ``M`` is fitted, ``M``'s pose is refitted
 to the earlier touches and ``i``'s predicted touch together, from each of
 its poses: a pose the earlier touches leave free, along a cylinder or over
 a flat patch, slides to absorb what it can.  The refit is one Gauss-Newton
-step on the point-to-plane residuals (:func:`_refit_rss`): with ``r`` the
-predicted points' signed distances to ``M`` and ``J`` their pose Jacobian,
-and ``H0 = J0^T J0`` the earlier touches' (whose residuals are at their
-optimum), the least sum of squares is ``r^T r - r^T J (H0 + J^T J)^-1 J^T r``.
-Under Gaussian noise of the session's sigma (the larger of the touches' own
-noise and the best joint fit's), model ``M``'s likelihood after the touch
-falls by ``exp(-RSS_iM / 2 sigma^2)``, its own model's not at all.  The
-expected gain is the entropy of the models' probabilities now less its
-expectation after the touch, in bits.  The candidate of largest gain is
-proposed.
+step on the point-to-plane residuals (:func:`_refit`): with ``r`` the
+predicted points' signed distances to ``M``, ``J`` their pose Jacobian and
+``H0 = J0^T J0`` the earlier touches' (whose residuals are at their
+optimum), the step is ``-(H0 + J^T J)^-1 J^T r``.  What is left is counted in
+the currency of the probabilities (:mod:`tactrec.probability`): how much the
+session's mean distance on ``M`` would rise over the truth's, each point's
+offset ``e`` adding the folded normal's mean at ``e`` less the half-normal's
+(:func:`_excess`), in standard errors of a difference of two such means
+(``z_iM``, :func:`_separation`).  The noise sigma is the session's: the
+touches' own, or the best joint fit's if that is larger.  After the touch,
+model ``M``'s probability is weighted by ``exp(-z_iM^2 / 2)``, the true
+model's by 1.  The expected gain is the entropy of the models' probabilities
+now less its expectation over the truths after the touch, in bits.  The
+candidate of largest gain is proposed.
 """
 
 from __future__ import annotations
@@ -172,7 +176,8 @@ def _excess(offset: np.ndarray, sigma: float) -> np.ndarray:
     linear)."""
     a = np.abs(offset)
     with np.errstate(under="ignore"):
-        return sigma * np.sqrt(2.0 / np.pi) * (np.exp(-0.5 * (a / sigma) ** 2) - 1.0) + a * erf(a / (sigma * np.sqrt(2.0)))
+        folded = sigma * np.sqrt(2.0 / np.pi) * np.exp(-0.5 * (a / sigma) ** 2) + a * erf(a / (sigma * np.sqrt(2.0)))
+    return folded - sigma * np.sqrt(2.0 / np.pi)
 
 
 def _separation(model, h, H0: np.ndarray, predicted: np.ndarray, sigma: float, earlier: int) -> np.ndarray:
