@@ -69,6 +69,11 @@ def paper_options(options: dict | None, method: str = "paper") -> tuple[tuple, s
     return items, "".join(f"-{k.replace('_', '-')}{v:g}" for k, v in items)
 
 
+def readings_text(options: tuple) -> str:
+    """The ``paper`` method's reading options (:func:`paper_options`) as printed after a table's settings."""
+    return "".join(f"; {k} = {v:g}" for k, v in options)
+
+
 def paper_values() -> dict:
     """The paper's published numbers (``paper_values.json``)."""
     return json.loads((resources.files("tactrec.bench") / "paper_values.json").read_text(encoding="utf-8"))

@@ -30,7 +30,7 @@ from ..database import build_entries
 from ..recognition import recognize
 from ..simulation import simulate_random_touch
 from ..surfaces import BUILTIN_SETS
-from .common import default_jobs, instance_rng, paper_options, paper_values, run_parallel, write_json
+from .common import default_jobs, instance_rng, paper_options, paper_values, readings_text, run_parallel, write_json
 
 __all__ = ["run_table2", "run_table3", "CONFIG"]
 
@@ -86,10 +86,6 @@ def _run(*, instances: int, seed: int, jobs: int | None, quiet: bool, method: st
     return run_parallel(_touch, tasks, jobs=jobs or default_jobs(), quiet=quiet, desc=desc)
 
 
-def _readings(options) -> str:
-    return "".join(f"; {k} = {v:g}" for k, v in options)
-
-
 def _fig8(records, out: Path, name: str) -> Path:
     from ..plots import _plt, plot_uv_locations, save_figure
 
@@ -128,7 +124,7 @@ def run_table2(*, out, instances: int = 10, seed: int = 0, jobs: int | None = No
     write_json(out / f"{stem}.json", table)
     table["plots"] = [str(_fig8(records, out, stem))]
     lines = [f"P1 / Table 2: |p - p*| over {instances} instances per surface "
-             f"(method {method}{_readings(options)}, seed {seed})",
+             f"(method {method}{readings_text(options)}, seed {seed})",
              f"{'surface':22s} {'min':>8s} {'max':>8s} {'mean':>8s}   paper: {'min':>7s} {'max':>7s} {'mean':>7s}"
              f"  {'s/touch':>7s}"]
     for name, r in rows.items():
@@ -179,7 +175,7 @@ def run_table3(*, out, instances: int = 10, seed: int = 0, jobs: int | None = No
     write_json(out / f"{stem}.json", table)
     table["plots"] = [str(_fig8(records, out, stem))]
     lines = [f"P2 / Table 3: recognition among {len(SURFACES)} surfaces, {instances} instances each "
-             f"(method {method}{_readings(options)}, seed {seed})",
+             f"(method {method}{readings_text(options)}, seed {seed})",
              f"{'surface':22s} {'correct':>8s} {'lookup':>7s} {'search':>7s}   paper: {'lookup':>6s} {'search':>6s}"
              f"  {'s/touch':>7s}"]
     for name, r in rows.items():

@@ -20,7 +20,7 @@ from ..estimation import estimate
 from ..methods.paper import PaperConfig
 from ..simulation import simulate_touch
 from ..surfaces import load_model
-from .common import instance_rng, paper_options, write_json
+from .common import instance_rng, paper_options, readings_text, write_json
 
 __all__ = ["run"]
 
@@ -55,8 +55,7 @@ def run(*, out, instances: int = 10, seed: int = 0, jobs=None, quiet: bool = Fal
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / f"{name}.json", table)
     lines = [f"Section 4.3.1: estimates at (u, v) = {UV} on the elliptic paraboloid, 61 points per curve, "
-             f"{instances} touches each (seed {seed}"
-             + "".join(f"; {k} = {v:g}" for k, v in options) + ")",
+             f"{instances} touches each (seed {seed}{readings_text(options)})",
              f"{'spacing':>8s} {'noise':>7s}   max |dN|  max |dk1|  max |dk2|   mean |dN| mean |dk1| mean |dk2|"]
     for r in rows:
         lines.append(f"{r['spacing']:8.3f} {r['noise']:7.3f}   " + " ".join(f"{x:9.5f}" for x in r["max"])
