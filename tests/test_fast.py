@@ -236,6 +236,46 @@ def test_the_budget_bounds_the_work_and_an_unsettled_search_says_so(scans):
     assert deeper.depth > 1 and deeper.work > r.work
 
 
+def test_a_search_with_other_touches_in_its_score_tries_the_poses_the_budget_allows_the_touch(scans):
+    """Noisy touches of the mug searched on their own and with two nearby touches' curves in their
+    score (a session's step 5), under a small budget: the budget bounds the poses tried, so the
+    search with context goes no deeper than the tiers the budget allows the touch alone and
+    spends at most the budget times the points it scores per point of the touch; and it fits the
+    three touches together no worse than the touch's own search fits them."""
+    entries = [scans.get("mug"), scans.get("hammer")]
+    model = entries[0].model
+    rng = np.random.default_rng(5)
+    budget, searched = 20_000, 0
+    with Recognizer(entries, budget=budget) as recognizer:
+        for i in range(6):
+            v = int(rng.integers(len(model.vertices)))
+            near = np.argsort(np.linalg.norm(model.vertices - model.vertices[v], axis=1))
+
+            def touch(site, seed):
+                return simulate_touch(model, [site], points=41, spacing=0.3, angle=30.0, noise=0.05, outward=False,
+                                      sensor_frame=False, rng=seed)
+            try:
+                data = touch(v, i)
+                sites = [int(near[len(near) // n]) for n in (40, 25)]
+                context = [c for k, site in enumerate(sites) for c in touch(site, 100 + 10 * i + k).curves]
+            except ValueError:
+                continue
+            alone, together = recognizer.recognize(data), recognizer.recognize(data, context=context)
+            cap = budget * len(entries) * len(together.touch.orientations)
+            scored = len(together.touch.joint_points) / len(together.touch.points)
+            assert scored == pytest.approx(3.0)
+            assert together.work <= cap * scored
+            every = np.concatenate([data.points, *context])
+
+            def mean(found):
+                r = found.ranking[0]
+                return float(np.mean(entries[[e.name for e in entries].index(r.model)].model.distance(
+                    every @ r.rotation.T + r.translation)))
+            assert mean(together) <= mean(alone) + 1e-9
+            searched += 1
+    assert searched >= 5
+
+
 def test_database_keeps_the_curvature_field_and_rejects_a_corrupted_one(tmp_path):
     out = tmp_path / "db"
     build_database(["pear"], out, quiet=True)

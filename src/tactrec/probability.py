@@ -45,8 +45,8 @@ from typing import Sequence
 
 import numpy as np
 
-__all__ = ["Evidence", "residuals", "evidence", "bootstrap_probabilities", "noise_fit", "fit_standard_error",
-           "AMBIGUOUS", "REPLICATES"]
+__all__ = ["Evidence", "residuals", "evidence", "bootstrap_probabilities", "noise_fit", "fit_limit",
+           "fit_standard_error", "AMBIGUOUS", "REPLICATES"]
 
 #: a result is ambiguous when its confidence (the best model's probability) is below this
 AMBIGUOUS = 0.95
@@ -58,6 +58,13 @@ def noise_fit(sigma: float) -> float:
     """The mean distance of a perfect fit under Gaussian noise of ``sigma`` per coordinate:
     the half-normal's mean, ``sigma sqrt(2 / pi)``."""
     return float(sigma) * np.sqrt(2.0 / np.pi)
+
+
+def fit_limit(touch, floor: float) -> float:
+    """The largest mean distance (data units) still a fit of ``touch`` (a :class:`~tactrec.features.Touch`):
+    a perfect fit's under its noise (:func:`noise_fit`), or ``floor`` x its radius on noise-free
+    data, whichever is larger."""
+    return max(noise_fit(touch.noise), floor * touch.radius)
 
 
 def fit_standard_error(fit: float, points: int) -> float:

@@ -84,6 +84,8 @@ class Method(Protocol):
 
     name: ClassVar[str]
     Config: ClassVar[type]
+    #: whether :meth:`search` scores its poses on a touch's context (other touches of the object) too
+    scores_context: ClassVar[bool]
 
     def configure(self, **options) -> Config: ...
 

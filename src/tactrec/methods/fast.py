@@ -33,7 +33,10 @@ data; or when the best is clear and its own tiers have run; or when nothing
 is left.  It also stops before a round whose estimated cost would take the
 work (closest-point queries) past ``budget`` per model; such a search is
 reported as not settled (the budget counts per model and per normal tried:
-twice as much without an ``outward`` hint).  The best ``polish`` models then take
+twice as much without an ``outward`` hint).  A round's cost is counted on the
+touch's own curves, so the budget bounds the poses tried: a search with other
+touches in its score (a session's) tries as many as the touch alone would and
+spends queries in proportion to the points it scores.  The best ``polish`` models then take
 ``polish_iterations`` more steps on all points.
 
 Every cut in a ranked list (screen, rotations, refinement) orders near-equal
@@ -51,6 +54,7 @@ import dataclasses
 import numpy as np
 
 from ..linalg import stable_order
+from ..probability import fit_limit
 from ..registration import closedform_fast, mesh_fast
 from ..registration.result import Registration
 from .base import Config, SearchOutcome
@@ -250,21 +254,16 @@ def _error(r: Registration | None) -> float:
     return r.error / r.scale if r is not None and r.ok else np.inf
 
 
-def fit_limit(touch, floor: float) -> float:
-    """The largest mean distance (data units) still a fit: a perfect fit's under the data's noise,
-    ``sigma sqrt(2 / pi)``, or ``floor`` x the touch's radius, whichever is larger."""
-    return max(touch.noise * np.sqrt(2.0 / np.pi), floor * touch.radius)
-
-
-def _tier_cost(config: FastConfig, k: int, signs: int, places: int) -> int:
-    """About how many closest-point queries tier ``k`` costs on one model with ``places`` places."""
+def _tier_cost(config: FastConfig, k: int, signs: int, places: int, curves: int = 3) -> int:
+    """About how many closest-point queries tier ``k`` costs on one model with ``places`` places, a
+    pose scored on ``curves`` curves."""
     tier = config.tiers[k]
     start, stop = _span(config.tiers, k)
     count = max(0, min(places, stop if stop is not None else places) - start)
     poses = count * signs * (2 if tier.rotations == "frames" else 12) * (5 if tier.tilt > 0 else 1)
     screened = min(poses, max(config.screen, poses // 8)) if tier.places is not None else poses
-    cheap = 3 * config.coarse_points * (poses + (config.cheap_steps - 1) * screened)
-    return int(cheap + config.refine * config.iterations * 9 * config.coarse_points)
+    cheap = curves * config.coarse_points * (poses + (config.cheap_steps - 1) * screened)
+    return int(cheap + config.refine * config.iterations * curves * 3 * config.coarse_points)
 
 
 class _State:
@@ -336,6 +335,7 @@ class FastMethod:
     """The ``fast`` method (see the module text)."""
 
     name = "fast"
+    scores_context = True
     Config = FastConfig
 
     def configure(self, **options) -> FastConfig:
@@ -366,7 +366,7 @@ class FastMethod:
                 break
             k = state.next[group[0]]
             group = [i for i in group if state.next[i] == k]
-            cost = sum(_tier_cost(config, k, signs, state.sizes[i]) for i in group)
+            cost = sum(_tier_cost(config, k, signs, state.sizes[i], len(touch.curves)) for i in group)
             if work > 0 and work + cost > config.budget * len(models) * signs:
                 break
             depth = max(depth, k + 1)

@@ -96,6 +96,7 @@ class PaperMethod:
     """The paper's method (see the module text)."""
 
     name = "paper"
+    scores_context = False
     Config = PaperConfig
 
     def configure(self, **options) -> PaperConfig:
