@@ -13,16 +13,21 @@ touch and a joint refinement (a second search only in step 5):
    scored on all touches' points, and the best two are refined jointly
    (point-to-plane Gauss-Newton on every point of every touch kept);
 3. a touch is *consistent* with a pose when its mean distance under it is
-   within three standard errors of its own fit on that model (or of a fit at
-   its noise, when the model was not accepted for it alone): the noise of
-   that touch decides, not a fixed tolerance;
+   within three standard errors of its own fit on that model, or of the
+   largest mean distance still a fit (:func:`tactrec.probability.fit_limit`:
+   a perfect fit's under its noise, or the method's ``floor`` x its radius on
+   noise-free data), whichever is larger: the noise of that touch decides,
+   not a fixed tolerance;
 4. a touch that no pose fitting most touches fits is reported as *slipped*
    (the contact moved, or the object did) and left out of every fit and
    probability, never averaged in;
-5. when the best model's pose does not fit every touch kept, the new touch is
+5. when the best model's pose is not consistent with every touch kept and
+   the new one (even if step 4 calls it slipped: a pose the earlier
+   searches missed can make a good touch look slipped), the new touch is
    searched again with the earlier touches' points in the score
-   (:meth:`tactrec.recognition.Recognizer.recognize` with ``context``), and
-   steps 2-4 run again on its poses;
+   (:meth:`tactrec.recognition.Recognizer.recognize` with ``context``: as
+   many poses as the touch's own search may try, each scored on every
+   touch), and steps 2-4 run again on its poses;
 6. the probabilities (:mod:`tactrec.probability`) come from every model's
    distances to the points of all touches kept, under its joint pose.
 """
@@ -38,13 +43,15 @@ from .errors import InputError
 from .io.session import SessionTouch, rigid_pose
 from .io.touch import TactileData
 from .linalg import transform
-from .probability import AMBIGUOUS, Evidence, evidence, fit_standard_error, noise_fit, planes, residuals
+from .probability import AMBIGUOUS, Evidence, evidence, fit_limit, fit_standard_error, planes, residuals
 
 
 __all__ = ["Session", "SessionResult", "Hypothesis", "CONSISTENT_SE"]
 
 #: a touch is consistent with a pose when its mean distance is within this many standard errors of its own fit
 CONSISTENT_SE = 3.0
+#: on noise-free data a fit is within this fraction of the touch's radius, for a method without a ``floor`` of its own
+FLOOR = 1e-3
 #: Gauss-Newton steps of a joint refinement, and how many candidate poses per model are refined
 JOINT_ITERATIONS, REFINED = 15, 2
 #: poses kept per model (the best and others the touches fit as well), and how far apart their contacts must be
@@ -173,25 +180,17 @@ def _normals(model, points: np.ndarray) -> np.ndarray:
     return planes(model, points)[1]
 
 
-def _fit_error(touch, registration) -> float:
-    """A touch's own fit on a model (data units), or, where the model was not accepted for it, the
-    mean distance of a fit at its noise."""
-    if registration is not None and registration.ok:
-        return registration.error / registration.scale
-    return noise_fit(touch.noise)
-
-
 class Session:
     """Touches of one still object, recognised together (see the module text).
 
     Parameters
     ----------
     recognizer : tactrec.recognition.Recognizer
-        Holds the models and the method; it is used for each touch on its own and kept between
-        touches (nothing is rebuilt).
+        Holds the models and the method; it is kept between touches (nothing is rebuilt).
     joint_search : bool
         When the best model's pose does not fit every touch, search the new touch again with the
-        earlier touches' points in the score (step 5 of the module text); False keeps to step 1.
+        earlier touches' points in the score (step 5 of the module text, for a method that scores
+        a context); False keeps to step 1.
     """
 
     def __init__(self, recognizer, *, joint_search: bool = True):
@@ -226,14 +225,21 @@ class Session:
         self.searches = [rec]
         self.features.append(rec.touch)
         self.result = self._joint_fit()
-        best = self.result.hypothesis(self.result.best) if self.result.best else None
-        if self.joint_search and context and (best is None or not all(
-                best.consistent[i] for i in range(len(self.features)) if i not in self.result.slipped)):
-            # no pose found fits every touch: search again from this touch, scoring poses on all
+        if self.joint_search and context and self.recognizer.method.scores_context \
+                and not self._explained(slipped):
+            # no pose found fits every touch kept and this one: search again from it, scoring poses on all
             self.searches.append(self.recognizer.recognize(world, context=context))
             self.result = self._joint_fit()
         self.result = dataclasses.replace(self.result, seconds=time.perf_counter() - start)
         return self.result
+
+    def _explained(self, slipped: set) -> bool:
+        """Whether the best model's joint pose is consistent with every touch but those ``slipped``
+        before this one, the new touch included even if step 4 calls it slipped: a touch is only
+        left out as slipped once a search scoring its poses on every touch (step 5) has found none
+        that fits them all."""
+        best = self.result.hypothesis(self.result.best) if self.result.best else None
+        return best is not None and all(c for i, c in enumerate(best.consistent) if i not in slipped)
 
     def next(self, *, radius: float, tolerance: float = 1.0, angle: float = 60.0, candidates: int = 48, rng=None):
         """Where to touch next (:func:`tactrec.proposal.propose`)."""
@@ -268,10 +274,10 @@ class Session:
     def _consistent(self, name: str, per_touch: np.ndarray) -> np.ndarray:
         """Which touches are consistent with poses whose per-touch errors are ``per_touch (h, N)``."""
         own, se = [], []
+        floor = getattr(self.recognizer.config, "floor", FLOOR)
         for f, rec in zip(self.features, self.solo):
-            r = next((r for r in rec.ranking if r.model == name), None)
-            e = _fit_error(f, r)
-            fit = max(e, noise_fit(f.noise))
+            r = next((r for r in rec.ranking if r.model == name and r.ok), None)
+            fit = max(0.0 if r is None else r.error / r.scale, fit_limit(f, floor))
             own.append(fit)
             se.append(fit_standard_error(fit, len(f.points)))
         return per_touch <= np.array(own)[None] + CONSISTENT_SE * np.array(se)[None]
