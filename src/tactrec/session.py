@@ -21,9 +21,10 @@ touch and a joint refinement (a second search only in step 5):
 4. a touch that no pose fitting most touches fits is reported as *slipped*
    (the contact moved, or the object did) and left out of every fit and
    probability, never averaged in;
-5. when the best model's pose is not consistent with every touch kept and
-   the new one (even if step 4 calls it slipped: a pose the earlier
-   searches missed can make a good touch look slipped), the new touch is
+5. when the best model's pose is not consistent with every touch not set
+   aside before this one (the new touch and any step 4 now calls slipped
+   included: a pose the earlier searches missed can make a good touch look
+   slipped), the new touch is
    searched again with the earlier touches' points in the score
    (:meth:`tactrec.recognition.Recognizer.recognize` with ``context``: as
    many poses as the touch's own search may try, each scored on every
