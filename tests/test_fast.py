@@ -276,6 +276,42 @@ def test_a_search_with_other_touches_in_its_score_tries_the_poses_the_budget_all
     assert searched >= 5
 
 
+def test_a_search_among_chosen_models_searches_those_alone_and_stops_at_its_callers_fit(scans):
+    """``among`` restricts a search to the named models (the others are rejected as not searched,
+    an unknown name is one InputError), and with a context the caller's ``fit`` decides when it
+    stops: with a fit a first-tier pose already reaches, the search settles after the first tier,
+    where the same search held to the touch's own noise goes deeper on some touches."""
+    from tactrec.methods.base import NOT_SEARCHED
+
+    entries = [scans.get("mug"), scans.get("hammer"), scans.get("banana")]
+    model = entries[0].model
+    rng = np.random.default_rng(11)
+    compared = deeper = 0
+    with Recognizer(entries) as recognizer:
+        with pytest.raises(InputError):
+            recognizer.recognize(simulate_random_touch(model, rng=1, spacing=0.3), among=["no such model"])
+        for i in range(8):
+            v = int(rng.integers(len(model.vertices)))
+            near = np.argsort(np.linalg.norm(model.vertices - model.vertices[v], axis=1))
+            try:
+                data, other = (simulate_touch(model, [site], points=41, spacing=0.3, angle=30.0, noise=0.05,
+                                              outward=False, sensor_frame=False, rng=seed)
+                               for site, seed in ((v, i), (int(near[len(near) // 30]), 50 + i)))
+            except ValueError:
+                continue
+            held = recognizer.recognize(data, context=other.curves, among=["mug", "hammer"])
+            assert {r.model for r in held.ranking if r.ok} <= {"mug", "hammer"}
+            banana = next(r for r in held.ranking if r.model == "banana")
+            assert not banana.ok and banana.rejected == NOT_SEARCHED
+            fit = 20 * held.ranking[0].error                 # what a first-tier pose already reaches
+            loose = recognizer.recognize(data, context=other.curves, among=["mug", "hammer"], fit=fit)
+            assert loose.settled and loose.depth == 1
+            assert loose.ranking[0].error <= fit
+            compared += 1
+            deeper += held.depth > 1
+    assert compared >= 6 and deeper >= 2
+
+
 def test_database_keeps_the_curvature_field_and_rejects_a_corrupted_one(tmp_path):
     out = tmp_path / "db"
     build_database(["pear"], out, quiet=True)

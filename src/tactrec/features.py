@@ -44,6 +44,9 @@ class Touch:
         Curves of other touches of the same object in the same frame (data units): a pose is
         scored on them too (:attr:`joint_points`), while the local geometry, the places and the
         noise come from this touch alone.
+    fit : float
+        With a context: the mean distance over all its points (data units) that its caller counts
+        as a fit of the touch and the context together (0: the touch's own fit limit decides).
     """
 
     data: TactileData
@@ -51,6 +54,7 @@ class Touch:
     scale: float = 1.0
     noise: float = 0.0
     context: tuple = ()
+    fit: float = 0.0
 
     @classmethod
     def from_data(cls, data: TactileData, *, window: int | str | None = "auto", degree: int = 3,
@@ -89,9 +93,11 @@ class Touch:
         """:func:`subset` of the joint curves."""
         return subset(self.joint_curves, per_curve)
 
-    def with_context(self, curves) -> "Touch":
-        """The same touch, its poses scored also on ``curves`` (other touches, same frame, data units)."""
-        return dataclasses.replace(self, context=tuple(np.asarray(c, dtype=np.float64) for c in curves))
+    def with_context(self, curves, *, fit: float = 0.0) -> "Touch":
+        """The same touch, its poses scored also on ``curves`` (other touches, same frame, data units);
+        ``fit``: the joint mean distance that counts as a fit of them all (see :attr:`fit`)."""
+        return dataclasses.replace(self, context=tuple(np.asarray(c, dtype=np.float64) for c in curves),
+                                   fit=float(fit))
 
     @cached_property
     def geometry(self) -> LocalGeometry:

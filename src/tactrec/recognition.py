@@ -22,6 +22,7 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
+from .errors import InputError
 from .estimation import LocalGeometry
 from .features import Touch
 from .io.touch import TactileData
@@ -274,15 +275,24 @@ class Recognizer:
 
         return Session(self)
 
-    def recognize(self, data: TactileData, *, context=()) -> Recognition:
+    def recognize(self, data: TactileData, *, context=(), among=None, fit: float = 0.0) -> Recognition:
         """Recognise one touch (Section 3.3).  ``context``: curves of other touches of the same object
         in the same frame, which the poses must fit too (a method that searches from this touch's
-        local geometry scores its poses on them; see :class:`~tactrec.features.Touch`)."""
+        local geometry scores its poses on them; see :class:`~tactrec.features.Touch`), and ``fit``
+        the mean distance over all those points that counts as a fit (0: this touch's own limit).
+        ``among``: the names of the models to search (None: all); the others are rejected as not
+        searched."""
         start = time.perf_counter()
         touch = Touch.from_data(data, **self.estimation)
         if len(context):
-            touch = touch.with_context(context)
-        outcome = self.method.search(touch, self.models, self.config, self.runner)
+            touch = touch.with_context(context, fit=fit)
+        chosen = None
+        if among is not None:
+            unknown = sorted(set(among) - set(self._by_name))
+            if unknown:
+                raise InputError(f"no model named {unknown[0]!r} among the recognizer's", "among")
+            chosen = [i for i, entry in enumerate(self.models) if entry.name in set(among)]
+        outcome = self.method.search(touch, self.models, self.config, self.runner, among=chosen)
         ranking = sorted(outcome.ranking, key=_rank_key)
         best = ranking[0].model if ranking and ranking[0].ok else None
         ok = [r for r in ranking if r.ok]

@@ -9,7 +9,8 @@ results, through these hooks:
 * :meth:`Method.prepare` -- per-model structures, built once (and kept in
   the worker processes);
 * :meth:`Method.search` -- the registrations, given a :class:`Runner` that
-  runs a stage over the models in worker processes or in this one.
+  runs a stage over the models in worker processes or in this one (on all
+  models, or on a chosen few: ``among``).
 
 A new method is its own module and one line in :data:`tactrec.methods.METHODS`.
 """
@@ -22,7 +23,10 @@ from typing import Any, Callable, ClassVar, Protocol, Sequence
 
 from ..errors import InputError
 
-__all__ = ["Config", "Method", "Runner", "SearchOutcome"]
+__all__ = ["Config", "Method", "Runner", "SearchOutcome", "NOT_SEARCHED"]
+
+#: why a model left out of a search (``among``) has no registration
+NOT_SEARCHED = "not among the models searched"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -91,4 +95,8 @@ class Method(Protocol):
 
     def prepare(self, model) -> None: ...
 
-    def search(self, touch, models: Sequence, config: Config, runner: Runner) -> SearchOutcome: ...
+    def search(self, touch, models: Sequence, config: Config, runner: Runner, *,
+               among: Sequence[int] | None = None) -> SearchOutcome:
+        """One registration per model of ``models``; only those at the indices ``among`` are searched
+        (all when None), the others are rejected as not searched."""
+        ...

@@ -29,8 +29,10 @@ tier first, when none contends.  The search stops (:meth:`_State.settled`)
 when the best error is a *fit*: within what the data's own noise allows (the
 mean distance of a perfect fit, ``sigma sqrt(2 / pi)``, ``sigma`` from the
 curves' third differences) or ``floor`` x the touch's radius on noise-free
-data; or when the best is clear and its own tiers have run; or when nothing
-is left.  It also stops before a round whose estimated cost would take the
+data (or, for a touch with a context, the larger joint fit its caller
+gives: :attr:`tactrec.features.Touch.fit`); or when the best is clear and
+its own tiers have run; or when nothing is left.  ``among`` limits a search
+to chosen models (the budget counts those alone).  It also stops before a round whose estimated cost would take the
 work (closest-point queries) past ``budget`` per model; such a search is
 reported as not settled (the budget counts per model and per normal tried:
 twice as much without an ``outward`` hint).  A round's cost is counted on the
@@ -57,7 +59,7 @@ from ..linalg import stable_order
 from ..probability import fit_limit
 from ..registration import closedform_fast, mesh_fast
 from ..registration.result import Registration
-from .base import Config, SearchOutcome
+from .base import NOT_SEARCHED, Config, SearchOutcome
 from .common import best_of_orientations, in_model_units
 
 __all__ = ["FastMethod", "FastConfig", "Tier", "TIERS"]
@@ -278,7 +280,7 @@ class _State:
         self.tried = {i: 0 for i in meshes}
         self.next = {i: 0 for i in meshes}
         self.sizes = {i: len(models[i].model.vertices) for i in meshes}
-        self.limit = fit_limit(touch, config.floor)
+        self.limit = max(fit_limit(touch, config.floor), touch.fit)      # a caller's joint fit, with a context
 
     def error(self, i: int) -> float:
         return _error(self.best.get(i))
@@ -348,9 +350,10 @@ class FastMethod:
         if model.kind == "mesh":
             mesh_fast.prepare(model)
 
-    def search(self, touch, models, config: FastConfig, runner) -> SearchOutcome:
-        meshes = [i for i, e in enumerate(models) if e.model.kind == "mesh"]
-        others = [i for i, e in enumerate(models) if e.model.kind != "mesh"]
+    def search(self, touch, models, config: FastConfig, runner, *, among=None) -> SearchOutcome:
+        chosen = range(len(models)) if among is None else sorted(among)
+        meshes = [i for i in chosen if models[i].model.kind == "mesh"]
+        others = [i for i in chosen if models[i].model.kind != "mesh"]
         state = _State(touch, models, meshes, config)
         work, settled, depth = 0, False, 0
         for i, found in zip(others, runner.map(_closed_form, others, touch, config)):
@@ -367,7 +370,7 @@ class FastMethod:
             k = state.next[group[0]]
             group = [i for i in group if state.next[i] == k]
             cost = sum(_tier_cost(config, k, signs, state.sizes[i], len(touch.curves)) for i in group)
-            if work > 0 and work + cost > config.budget * len(models) * signs:
+            if work > 0 and work + cost > config.budget * len(chosen) * signs:
                 break
             depth = max(depth, k + 1)
             work += self._tier(state, group, k, runner)
@@ -415,6 +418,8 @@ class FastMethod:
                 ranking.append(dataclasses.replace(r, candidates=state.tried[i]) if i in state.tried else r)
             elif i in state.rejected:
                 ranking.append(Registration.rejection(entry.name, state.rejected[i]))
+            elif i not in state.cheapest:
+                ranking.append(Registration.rejection(entry.name, NOT_SEARCHED))
             else:
                 ranking.append(Registration.rejection(
                     entry.name, f"deferred: its best cheap score {state.cheapest[i]:.3g} stayed beyond "

@@ -26,7 +26,7 @@ import dataclasses
 from ..estimation import estimate
 from ..registration import closedform_paper, mesh_paper
 from ..registration.result import Registration
-from .base import Config, SearchOutcome
+from .base import NOT_SEARCHED, Config, SearchOutcome
 from .common import best_of_orientations, in_model_units
 
 __all__ = ["PaperMethod", "PaperConfig"]
@@ -105,8 +105,11 @@ class PaperMethod:
     def prepare(self, model) -> None:
         """Nothing beyond the lookup table, which the database holds."""
 
-    def search(self, touch, models, config: PaperConfig, runner) -> SearchOutcome:
+    def search(self, touch, models, config: PaperConfig, runner, *, among=None) -> SearchOutcome:
         own = config.geometry(touch.data)          # this reading's estimate, once for every model
         if own is not None:
             touch = dataclasses.replace(touch, estimate=own)
-        return SearchOutcome(runner.map(_stage, range(len(models)), touch, config))
+        chosen = range(len(models)) if among is None else sorted(among)
+        found = dict(zip(chosen, runner.map(_stage, chosen, touch, config)))
+        return SearchOutcome([found[i] if i in found else Registration.rejection(e.name, NOT_SEARCHED)
+                              for i, e in enumerate(models)])
