@@ -24,11 +24,17 @@ touch and a joint refinement (a second search only in step 5):
 5. when the best model's pose is not consistent with every touch not set
    aside before this one (the new touch and any step 4 now calls slipped
    included: a pose the earlier searches missed can make a good touch look
-   slipped), the new touch is
-   searched again with the earlier touches' points in the score
-   (:meth:`tactrec.recognition.Recognizer.recognize` with ``context``: as
-   many poses as the touch's own search may try, each scored on every
-   touch), and steps 2-4 run again on its poses;
+   slipped), the new touch is searched again with the earlier touches'
+   points in the score (:meth:`tactrec.recognition.Recognizer.recognize`
+   with ``context``), and steps 2-4 run again on its poses.  That search
+   covers the models the new touch fits on its own (its own search's error
+   within three standard errors of its best model's, or of ``fit_limit``)
+   whose pose does not fit every touch: a model the touch does not fit
+   cannot fit it jointly, and one whose pose fits them all needs no other.
+   It may try as many poses per model as the touch's own search, each
+   scored on every touch, and it stops once its best pose fits the touches
+   as well as each touch's own best fit allows (the points-weighted mean of
+   those limits);
 6. the probabilities (:mod:`tactrec.probability`) come from every model's
    distances to the points of all touches kept, under its joint pose.
 """
@@ -226,10 +232,16 @@ class Session:
         self.searches = [rec]
         self.features.append(rec.touch)
         self.result = self._joint_fit()
-        if self.joint_search and context and self.recognizer.method.scores_context \
-                and not self._explained(slipped):
-            # no pose found fits every touch kept and this one: search again from it, scoring poses on all
-            self.searches.append(self.recognizer.recognize(world, context=context))
+        among = self._unexplained(slipped) if self.joint_search and context \
+            and self.recognizer.method.scores_context and not self._explained(slipped) else []
+        if among:
+            # no pose found fits every touch kept and this one: search again from it, scoring poses on
+            # all, the models this touch fits on its own whose pose does not fit them all, until a
+            # pose fits them as well as each touch's own best fit allows
+            use = [i for i in range(len(self.features)) if i not in slipped]
+            sizes = np.array([len(self.features[i].points) for i in use])
+            fit = float(sizes @ self._limits()[use] / sizes.sum())
+            self.searches.append(self.recognizer.recognize(world, context=context, among=among, fit=fit))
             self.result = self._joint_fit()
         self.result = dataclasses.replace(self.result, seconds=time.perf_counter() - start)
         return self.result
@@ -241,6 +253,31 @@ class Session:
         that fits them all."""
         best = self.result.hypothesis(self.result.best) if self.result.best else None
         return best is not None and all(c for i, c in enumerate(best.consistent) if i not in slipped)
+
+    def _limits(self) -> np.ndarray:
+        """Per touch ``(N,)``, data units: the largest mean distance of a fit as good as its own search
+        found on any model: within three standard errors of its best model's error, or of
+        :func:`fit_limit`, whichever is larger."""
+        floor = getattr(self.recognizer.config, "floor", FLOOR)
+        out = []
+        for f, rec in zip(self.features, self.solo):
+            fit = min([r.error / r.scale for r in rec.ranking if r.ok], default=0.0)
+            fit = max(fit, fit_limit(f, floor))
+            out.append(fit + CONSISTENT_SE * fit_standard_error(fit, len(f.points)))
+        return np.array(out)
+
+    def _unexplained(self, slipped: set) -> list[str]:
+        """The models step 5 searches again: those the new touch fits on its own (its own search's
+        error within :meth:`_limits`), whose joint pose is not consistent with every touch but those
+        ``slipped`` before."""
+        limit = self._limits()[-1]
+        out = []
+        for r in self.solo[-1].ranking:
+            h = self.result.hypothesis(r.model)
+            fits_all = h is not None and all(c for i, c in enumerate(h.consistent) if i not in slipped)
+            if r.ok and r.error / r.scale <= limit and not fits_all:
+                out.append(r.model)
+        return out
 
     def next(self, *, radius: float, tolerance: float = 1.0, angle: float = 60.0, candidates: int = 48, rng=None):
         """Where to touch next (:func:`tactrec.proposal.propose`)."""
