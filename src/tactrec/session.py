@@ -33,8 +33,11 @@ touch and a joint refinement (a second search only in step 5):
    cannot fit it jointly, and one whose pose fits them all needs no other.
    It may try as many poses per model as the touch's own search, each
    scored on every touch, and it stops once its best pose fits the touches
-   as well as each touch's own best fit allows (the points-weighted mean of
-   those limits);
+   as well as their own searches fit each (the points-weighted mean of each
+   touch's best fit on any model, or of ``fit_limit``, whichever is larger):
+   the joint form of the single search's rule, with no allowance above it,
+   since a search that stops at a pose a little off hands the lead to
+   another model;
 6. the probabilities (:mod:`tactrec.probability`) come from every model's
    distances to the points of all touches kept, under its joint pose.
 """
@@ -237,10 +240,10 @@ class Session:
         if among:
             # no pose found fits every touch kept and this one: search again from it, scoring poses on
             # all, the models this touch fits on its own whose pose does not fit them all, until a
-            # pose fits them as well as each touch's own best fit allows
+            # pose fits them as well as the touches' own searches fit each
             use = [i for i in range(len(self.features)) if i not in slipped]
             sizes = np.array([len(self.features[i].points) for i in use])
-            fit = float(sizes @ self._limits()[use] / sizes.sum())
+            fit = float(sizes @ self._own_fits()[use] / sizes.sum())
             self.searches.append(self.recognizer.recognize(world, context=context, among=among, fit=fit))
             self.result = self._joint_fit()
         self.result = dataclasses.replace(self.result, seconds=time.perf_counter() - start)
@@ -254,17 +257,18 @@ class Session:
         best = self.result.hypothesis(self.result.best) if self.result.best else None
         return best is not None and all(c for i, c in enumerate(best.consistent) if i not in slipped)
 
-    def _limits(self) -> np.ndarray:
-        """Per touch ``(N,)``, data units: the largest mean distance of a fit as good as its own search
-        found on any model: within three standard errors of its best model's error, or of
+    def _own_fits(self) -> np.ndarray:
+        """Per touch ``(N,)``, data units: the fit its own search reached on its best model, or
         :func:`fit_limit`, whichever is larger."""
         floor = getattr(self.recognizer.config, "floor", FLOOR)
-        out = []
-        for f, rec in zip(self.features, self.solo):
-            fit = min([r.error / r.scale for r in rec.ranking if r.ok], default=0.0)
-            fit = max(fit, fit_limit(f, floor))
-            out.append(fit + CONSISTENT_SE * fit_standard_error(fit, len(f.points)))
-        return np.array(out)
+        return np.array([max(min([r.error / r.scale for r in rec.ranking if r.ok], default=0.0), fit_limit(f, floor))
+                         for f, rec in zip(self.features, self.solo)])
+
+    def _limits(self) -> np.ndarray:
+        """Per touch ``(N,)``, data units: the largest mean distance of a fit as good as its own search
+        found on any model: within three standard errors of :meth:`_own_fits`."""
+        fits = self._own_fits()
+        return fits + CONSISTENT_SE * np.array([fit_standard_error(e, len(f.points)) for e, f in zip(fits, self.features)])
 
     def _unexplained(self, slipped: set) -> list[str]:
         """The models step 5 searches again: those the new touch fits on its own (its own search's
