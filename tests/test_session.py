@@ -201,3 +201,39 @@ def test_next_measures_a_difference_after_refitting_the_pose_the_touches_leave_f
     a = np.array([0.0, 0.3, 1.0, 4.0]) * sigma
     folded = np.array([stats.foldnorm.mean(x / sigma, scale=sigma) for x in a])
     assert np.allclose(_excess(a, sigma), folded - sigma * np.sqrt(2 / np.pi), atol=1e-12)
+
+
+def test_a_new_touch_whose_own_search_fitted_nothing_rules_no_model_out(small):
+    """Step 5's models: two noisy touches of the egg.  The second touch's own errors rule out the
+    models beyond its limits only while its own search fitted some model; once every model's own
+    error is far beyond what its noise allows (a search that missed everywhere), every model whose
+    joint pose does not fit every touch is searched again, the ones it ruled out included."""
+    import dataclasses
+
+    entry = small[0]
+    Rw, tw = random_rigid_motion(instance_rng(14), extent=300.0)
+    with Recognizer(small) as recognizer:
+        session = recognizer.session()
+        for i in range(2):
+            touch = simulate_random_touch(entry.model, rng=instance_rng(15, i), **NOISY)
+            session.add(touch, sensor_to_world(touch, (Rw, tw)))
+    slipped = set(session.result.slipped)
+
+    def failing(name):
+        h = session.result.hypothesis(name)
+        return h is None or not all(c for i, c in enumerate(h.consistent) if i not in slipped)
+
+    own = session.solo[-1]
+    limit = session._limits()[-1]
+    searched = set(session._unexplained(slipped))
+    assert searched == {r.model for r in own.ranking if r.ok and r.error / r.scale <= limit and failing(r.model)}
+    # the same touch as if its own search had missed everywhere: ten times every error
+    missed = dataclasses.replace(own, ranking=[dataclasses.replace(r, error=10 * r.error) if r.ok else r
+                                                for r in own.ranking])
+    session.solo[-1] = missed
+    widened = set(session._unexplained(slipped))
+    deferred = {r.model for r in own.ranking if str(r.rejected).startswith("deferred")}
+    assert widened == {r.model for r in own.ranking if r.ok and failing(r.model)} | {m for m in deferred if failing(m)}
+    assert searched <= widened
+    assert any(failing(r.model) and r.ok and r.error / r.scale > limit for r in own.ranking) or deferred, \
+        "the touch leaves no model beyond its limit to rule out: the check above is vacuous"

@@ -2,7 +2,7 @@
 
 A :class:`Session` keeps the touches of one object in a common *world*
 frame.  Adding a touch (:meth:`Session.add`) costs one recognition of that
-touch and a joint refinement (a second search only in step 5):
+touch and a joint refinement (more searches only in step 5):
 
 1. the touch, moved into the world frame by its ``sensor2world`` pose, is
    recognised on its own by the recognizer's method; each accepted model's
@@ -26,18 +26,29 @@ touch and a joint refinement (a second search only in step 5):
    included: a pose the earlier searches missed can make a good touch look
    slipped), the new touch is searched again with the earlier touches'
    points in the score (:meth:`tactrec.recognition.Recognizer.recognize`
-   with ``context``), and steps 2-4 run again on its poses.  That search
-   covers the models the new touch fits on its own (its own search's error
-   within three standard errors of its best model's, or of ``fit_limit``)
-   whose pose does not fit every touch: a model the touch does not fit
-   cannot fit it jointly, and one whose pose fits them all needs no other.
-   It may try as many poses per model as the touch's own search, each
-   scored on every touch, and it stops once its best pose fits the touches
-   as well as their own searches fit each (the points-weighted mean of each
-   touch's best fit on any model, or of ``fit_limit``, whichever is larger):
-   the joint form of the single search's rule, with no allowance above it,
-   since a search that stops at a pose a little off hands the lead to
-   another model;
+   with ``context``), and steps 2-4 run again on its poses; if still no pose
+   fits them all, the touch kept before it is searched the same way with
+   the others as its context (:data:`STARTS`): a touch may be searched
+   with the others in its score when it is added and again when the next
+   one is.  A search ranks a touch's places by curvature, and on a short
+   noisy touch the true place can rank beyond its schedule; another touch's
+   places rank by other curvatures.  A touch's search is not repeated from
+   every earlier touch: each such search scores all the touches, and the
+   cost of an add would grow with the square of their number.  Those
+   searches cover the models the new touch fits on its own (its own search's
+   error within three standard errors of its best model's, or of
+   ``fit_limit``) whose pose does not fit every touch: a model the touch
+   does not fit cannot fit it jointly, and one whose pose fits them all
+   needs no other.  When the new touch's own search fitted no model (its
+   best error beyond ``fit_limit`` and three standard errors), its errors
+   rule nothing out and every model whose pose does not fit every touch is
+   covered.  Each search may try as many poses per model as the touch's own
+   search, each scored on every touch, and it stops once its best pose fits
+   the touches as well as their own searches fit each (the points-weighted
+   mean of each touch's best fit on any model, or of ``fit_limit``,
+   whichever is larger): the joint form of the single search's rule, with
+   no allowance above it, since a search that stops at a pose a little off
+   hands the lead to another model;
 6. the probabilities (:mod:`tactrec.probability`) come from every model's
    distances to the points of all touches kept, under its joint pose.
 """
@@ -67,6 +78,9 @@ JOINT_ITERATIONS, REFINED = 15, 2
 #: poses kept per model (the best and others the touches fit as well), and how far apart their contacts must be
 #: (a fraction of the touches' reach)
 FAMILY, APART = 5, 0.5
+#: step 5 searches from this many touches, newest first: the new one and the one kept before it, so a
+#: touch may be searched with the others in its score when it is added and again when the next one is
+STARTS = 2
 #: a motion is free when the fit's curvature along it is below this fraction of the largest; Gauss-Newton
 #: steps of a pose moved along it
 FREE, FAMILY_ITERATIONS = 1e-3, 6
@@ -227,7 +241,7 @@ class Session:
                              data.source)
         world = touch.in_world()
         slipped = set(self.result.slipped) if self.result is not None else set()
-        context = [c for i, w in enumerate(self.world) if i not in slipped for c in w.curves]
+        earlier = any(i not in slipped for i in range(len(self.world)))
         rec = self.recognizer.recognize(world)
         self.touches.append(touch)
         self.world.append(world)
@@ -235,19 +249,31 @@ class Session:
         self.searches = [rec]
         self.features.append(rec.touch)
         self.result = self._joint_fit()
-        among = self._unexplained(slipped) if self.joint_search and context \
-            and self.recognizer.method.scores_context and not self._explained(slipped) else []
-        if among:
-            # no pose found fits every touch kept and this one: search again from it, scoring poses on
-            # all, the models this touch fits on its own whose pose does not fit them all, until a
-            # pose fits them as well as the touches' own searches fit each
-            use = [i for i in range(len(self.features)) if i not in slipped]
-            sizes = np.array([len(self.features[i].points) for i in use])
-            fit = float(sizes @ self._own_fits()[use] / sizes.sum())
-            self.searches.append(self.recognizer.recognize(world, context=context, among=among, fit=fit))
-            self.result = self._joint_fit()
+        if self.joint_search and earlier and self.recognizer.method.scores_context:
+            self._search_jointly(slipped)
         self.result = dataclasses.replace(self.result, seconds=time.perf_counter() - start)
         return self.result
+
+    def _search_jointly(self, slipped: set) -> None:
+        """Step 5: while no pose found fits every touch kept, search again from one of them, scoring
+        poses on all: the new touch, then the one kept before it (:data:`STARTS`).  Each search covers
+        the models the new touch fits on its own whose pose does not fit them all, and stops once a
+        pose fits the touches as well as their own searches fit each."""
+        use = [i for i in range(len(self.features)) if i not in slipped]
+        sizes = np.array([len(self.features[i].points) for i in use])
+        fit = float(sizes @ self._own_fits()[use] / sizes.sum())
+        for start in use[::-1][:STARTS]:
+            if self._explained(slipped):
+                return
+            among = self._unexplained(slipped)
+            if not among:
+                return
+            # a pose of one touch that the others rule out is where a search from that touch
+            # stopped; another touch's places rank the truth by other curvatures
+            context = [c for i in use if i != start for c in self.world[i].curves]
+            self.searches.append(self.recognizer.recognize(self.world[start], context=context, among=among,
+                                                           fit=fit))
+            self.result = self._joint_fit()
 
     def _explained(self, slipped: set) -> bool:
         """Whether the best model's joint pose is consistent with every touch but those ``slipped``
@@ -271,15 +297,22 @@ class Session:
         return fits + CONSISTENT_SE * np.array([fit_standard_error(e, len(f.points)) for e, f in zip(fits, self.features)])
 
     def _unexplained(self, slipped: set) -> list[str]:
-        """The models step 5 searches again: those the new touch fits on its own (its own search's
-        error within :meth:`_limits`), whose joint pose is not consistent with every touch but those
-        ``slipped`` before."""
-        limit = self._limits()[-1]
+        """The models step 5 searches again: those whose joint pose is not consistent with every
+        touch but those ``slipped`` before, and that the new touch fits on its own (its own search's
+        error within :meth:`_limits`).  When that search fitted no model (its best error beyond
+        what the touch's noise allows, :func:`fit_limit` and three standard errors), its errors
+        rule nothing out: the models it deferred unrefined are searched too."""
+        floor = getattr(self.recognizer.config, "floor", FLOOR)
+        f = self.features[-1]
+        noise = fit_limit(f, floor)
+        fitted = self._own_fits()[-1] <= noise + CONSISTENT_SE * fit_standard_error(noise, len(f.points))
+        limit = self._limits()[-1] if fitted else np.inf
         out = []
         for r in self.solo[-1].ranking:
             h = self.result.hypothesis(r.model)
             fits_all = h is not None and all(c for i, c in enumerate(h.consistent) if i not in slipped)
-            if r.ok and r.error / r.scale <= limit and not fits_all:
+            own = r.error / r.scale if r.ok else (np.inf if str(r.rejected).startswith("deferred") else None)
+            if own is not None and own <= limit and not fits_all:
                 out.append(r.model)
         return out
 
