@@ -59,6 +59,13 @@ def test_a_session_finds_the_world_to_model_pose(small):
                 assert np.max(np.linalg.norm(found - truth @ S.T, axis=1)) < 0.5
 
 
+def _add_touches(session, model, pose, count: int, key: int) -> None:
+    """Add ``count`` noisy touches of ``model`` (seeded by ``key``), the object at world ``pose``."""
+    for i in range(count):
+        touch = simulate_random_touch(model, rng=instance_rng(key, i), **NOISY)
+        session.add(touch, sensor_to_world(touch, pose))
+
+
 def test_a_slipped_touch_is_reported_not_averaged(small):
     """Three touches of the egg and then a fourth after the object moved (another world pose):
     the fourth is reported slipped, the egg stays best and its pose fits the first three at the
@@ -68,9 +75,7 @@ def test_a_slipped_touch_is_reported_not_averaged(small):
     Rm, tm = random_rigid_motion(instance_rng(10), extent=300.0)
     with Recognizer(small) as recognizer:
         session = recognizer.session()
-        for i in range(3):
-            touch = simulate_random_touch(entry.model, rng=instance_rng(11, i), **NOISY)
-            session.add(touch, sensor_to_world(touch, (Rw, tw)))
+        _add_touches(session, entry.model, (Rw, tw), 3, 11)
         touch = simulate_random_touch(entry.model, rng=instance_rng(11, 3), **NOISY)
         result = session.add(touch, sensor_to_world(touch, (Rm, tm)))
     assert result.slipped == (3,)
@@ -211,12 +216,9 @@ def test_a_new_touch_whose_own_search_fitted_nothing_rules_no_model_out(small):
     import dataclasses
 
     entry = small[0]
-    Rw, tw = random_rigid_motion(instance_rng(14), extent=300.0)
     with Recognizer(small) as recognizer:
         session = recognizer.session()
-        for i in range(2):
-            touch = simulate_random_touch(entry.model, rng=instance_rng(15, i), **NOISY)
-            session.add(touch, sensor_to_world(touch, (Rw, tw)))
+        _add_touches(session, entry.model, random_rigid_motion(instance_rng(14), extent=300.0), 2, 15)
     slipped = set(session.result.slipped)
 
     def failing(name):
