@@ -64,7 +64,8 @@ from .errors import InputError
 from .io.session import SessionTouch, rigid_pose
 from .io.touch import TactileData
 from .linalg import transform
-from .probability import AMBIGUOUS, Evidence, evidence, fit_limit, fit_standard_error, planes, residuals
+from .probability import evidence, fit_limit, fit_standard_error, planes, residuals
+from .session_result import Hypothesis, SessionResult
 
 
 __all__ = ["Session", "SessionResult", "Hypothesis", "CONSISTENT_SE"]
@@ -84,107 +85,6 @@ STARTS = 2
 #: a motion is free when the fit's curvature along it is below this fraction of the largest; Gauss-Newton
 #: steps of a pose moved along it
 FREE, FAMILY_ITERATIONS = 1e-3, 6
-
-
-@dataclasses.dataclass(frozen=True)
-class Hypothesis:
-    """One model's joint pose over a session's touches.
-
-    Attributes
-    ----------
-    model : str
-    rotation, translation : (3, 3), (3,) float
-        ``world2model``: ``model = scale * rotation @ world + translation``.
-    scale : float
-        World (data) units to model units.
-    error : float
-        Mean distance of the points of the touches it fits to the model, data units.
-    per_touch : (N,) float
-        Each touch's mean distance under this pose, data units.
-    consistent : tuple of bool
-        Whether each touch is consistent with the pose (see the module text).
-    poses : (p, 3, 4) float or None
-        The pose first, then poses along the motions the touches leave free (along a cylinder,
-        over a flat patch) that every touch is still consistent with (``[R | t]`` each);
-        computed when :meth:`Session.family` is asked (None until then).
-    """
-
-    model: str
-    rotation: np.ndarray
-    translation: np.ndarray
-    scale: float
-    error: float
-    per_touch: np.ndarray
-    consistent: tuple
-    poses: np.ndarray | None = None
-
-    def to_json(self, probability: float | None = None, contact: np.ndarray | None = None) -> dict:
-        """The ranking entry; ``location`` is where the world point ``contact`` (the latest touch's
-        contact) lies on the model under this pose."""
-        out = {"model": self.model, "error": float(self.error)}
-        if contact is not None:
-            out["location"] = (self.scale * self.rotation @ contact + self.translation).tolist()
-        out.update(rotation=self.rotation.tolist(), translation=self.translation.tolist(),
-                   per_touch_error=[float(e) for e in self.per_touch])
-        if self.scale != 1.0:
-            out["scale"] = float(self.scale)
-        if probability is not None:
-            out["probability"] = float(probability)
-        if not all(self.consistent):
-            out["inconsistent_touches"] = [i for i, c in enumerate(self.consistent) if not c]
-        return out
-
-
-@dataclasses.dataclass(frozen=True)
-class SessionResult:
-    """The recognition of a session: one object, one pose per model.
-
-    ``ranking`` holds the models with a joint pose, by error over the touches not slipped;
-    ``probabilities`` are theirs (sum 1); ``slipped`` the touches no model's pose fits;
-    ``estimate`` the latest touch's contact, normal and curvatures in the world frame.
-    """
-
-    ranking: list
-    evidence: Evidence | None
-    slipped: tuple
-    touches: int
-    rejected: dict
-    seconds: float
-    estimate: object = None
-
-    @property
-    def best(self) -> str | None:
-        return self.ranking[0].model if self.ranking else None
-
-    @property
-    def probabilities(self) -> dict[str, float]:
-        if self.evidence is None:
-            return {}
-        return dict(zip(self.evidence.models, self.evidence.probabilities().tolist()))
-
-    @property
-    def confidence(self) -> float:
-        return float(self.probabilities.get(self.best, 0.0)) if self.best else 0.0
-
-    @property
-    def ambiguous(self) -> bool:
-        return self.best is not None and self.confidence < AMBIGUOUS
-
-    def hypothesis(self, model: str) -> Hypothesis | None:
-        return next((h for h in self.ranking if h.model == model), None)
-
-    def to_json(self) -> dict:
-        """INTERFACE.md's result for a session (``rotation``/``translation`` map the world onto each model)."""
-        p = self.probabilities
-        g = self.estimate
-        ranking = [h.to_json(p.get(h.model), None if g is None else g.contact) for h in self.ranking]
-        ranking += [{"model": name, "error": None, "rejected": why} for name, why in self.rejected.items()]
-        out = {"best": self.best, "ranking": ranking}
-        if g is not None:                                            # the latest touch, world frame
-            out.update(contact=g.contact.tolist(), normal=g.normal.tolist(), curvatures=[g.k1, g.k2])
-        out.update(confidence=self.confidence, ambiguous=self.ambiguous, touches=self.touches,
-                   slipped=list(self.slipped), seconds=round(self.seconds, 4))
-        return out
 
 
 def _refine(model, R: np.ndarray, t: np.ndarray, x: np.ndarray, iterations: int):
@@ -268,8 +168,8 @@ class Session:
             among = self._unexplained(slipped)
             if not among:
                 return
-            # a pose of one touch that the others rule out is where a search from that touch
-            # stopped; another touch's places rank the truth by other curvatures
+            # a search that stopped at a pose the other touches rule out may reach the truth from
+            # another touch, whose places rank by other curvatures
             context = [c for i in use if i != start for c in self.world[i].curves]
             self.searches.append(self.recognizer.recognize(self.world[start], context=context, among=among,
                                                            fit=fit))
@@ -301,7 +201,8 @@ class Session:
         touch but those ``slipped`` before, and that the new touch fits on its own (its own search's
         error within :meth:`_limits`).  When that search fitted no model (its best error beyond
         what the touch's noise allows, :func:`fit_limit` and three standard errors), its errors
-        rule nothing out: the models it deferred unrefined are searched too."""
+        rule nothing out: every model whose joint pose fails some touch is searched, those it
+        deferred unrefined included."""
         floor = getattr(self.recognizer.config, "floor", FLOOR)
         f = self.features[-1]
         noise = fit_limit(f, floor)

@@ -1,0 +1,113 @@
+"""What a session's recognition returns: one model's joint pose (:class:`Hypothesis`) and the
+result over all models (:class:`SessionResult`); :mod:`tactrec.session` computes them."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from .probability import AMBIGUOUS, Evidence
+
+__all__ = ["Hypothesis", "SessionResult"]
+
+
+@dataclasses.dataclass(frozen=True)
+class Hypothesis:
+    """One model's joint pose over a session's touches.
+
+    Attributes
+    ----------
+    model : str
+    rotation, translation : (3, 3), (3,) float
+        ``world2model``: ``model = scale * rotation @ world + translation``.
+    scale : float
+        World (data) units to model units.
+    error : float
+        Mean distance of the points of the touches it fits to the model, data units.
+    per_touch : (N,) float
+        Each touch's mean distance under this pose, data units.
+    consistent : tuple of bool
+        Whether each touch is consistent with the pose (see :mod:`tactrec.session`).
+    poses : (p, 3, 4) float or None
+        The pose first, then poses along the motions the touches leave free (along a cylinder,
+        over a flat patch) that every touch is still consistent with (``[R | t]`` each);
+        computed when :meth:`Session.family` is asked (None until then).
+    """
+
+    model: str
+    rotation: np.ndarray
+    translation: np.ndarray
+    scale: float
+    error: float
+    per_touch: np.ndarray
+    consistent: tuple
+    poses: np.ndarray | None = None
+
+    def to_json(self, probability: float | None = None, contact: np.ndarray | None = None) -> dict:
+        """The ranking entry; ``location`` is where the world point ``contact`` (the latest touch's
+        contact) lies on the model under this pose."""
+        out = {"model": self.model, "error": float(self.error)}
+        if contact is not None:
+            out["location"] = (self.scale * self.rotation @ contact + self.translation).tolist()
+        out.update(rotation=self.rotation.tolist(), translation=self.translation.tolist(),
+                   per_touch_error=[float(e) for e in self.per_touch])
+        if self.scale != 1.0:
+            out["scale"] = float(self.scale)
+        if probability is not None:
+            out["probability"] = float(probability)
+        if not all(self.consistent):
+            out["inconsistent_touches"] = [i for i, c in enumerate(self.consistent) if not c]
+        return out
+
+
+@dataclasses.dataclass(frozen=True)
+class SessionResult:
+    """The recognition of a session: one object, one pose per model.
+
+    ``ranking`` holds the models with a joint pose, by error over the touches not slipped;
+    ``probabilities`` are theirs (sum 1); ``slipped`` the touches no model's pose fits;
+    ``estimate`` the latest touch's contact, normal and curvatures in the world frame.
+    """
+
+    ranking: list
+    evidence: Evidence | None
+    slipped: tuple
+    touches: int
+    rejected: dict
+    seconds: float
+    estimate: object = None
+
+    @property
+    def best(self) -> str | None:
+        return self.ranking[0].model if self.ranking else None
+
+    @property
+    def probabilities(self) -> dict[str, float]:
+        if self.evidence is None:
+            return {}
+        return dict(zip(self.evidence.models, self.evidence.probabilities().tolist()))
+
+    @property
+    def confidence(self) -> float:
+        return float(self.probabilities.get(self.best, 0.0)) if self.best else 0.0
+
+    @property
+    def ambiguous(self) -> bool:
+        return self.best is not None and self.confidence < AMBIGUOUS
+
+    def hypothesis(self, model: str) -> Hypothesis | None:
+        return next((h for h in self.ranking if h.model == model), None)
+
+    def to_json(self) -> dict:
+        """INTERFACE.md's result for a session (``rotation``/``translation`` map the world onto each model)."""
+        p = self.probabilities
+        g = self.estimate
+        ranking = [h.to_json(p.get(h.model), None if g is None else g.contact) for h in self.ranking]
+        ranking += [{"model": name, "error": None, "rejected": why} for name, why in self.rejected.items()]
+        out = {"best": self.best, "ranking": ranking}
+        if g is not None:                                            # the latest touch, world frame
+            out.update(contact=g.contact.tolist(), normal=g.normal.tolist(), curvatures=[g.k1, g.k2])
+        out.update(confidence=self.confidence, ambiguous=self.ambiguous, touches=self.touches,
+                   slipped=list(self.slipped), seconds=round(self.seconds, 4))
+        return out
