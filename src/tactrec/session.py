@@ -87,6 +87,12 @@ STARTS = 2
 FREE, FAMILY_ITERATIONS = 1e-3, 6
 
 
+def _allowed(fit: float, points: int) -> float:
+    """The largest mean distance as good as a fit of ``fit`` over ``points`` points: within
+    :data:`CONSISTENT_SE` of its standard errors."""
+    return fit + CONSISTENT_SE * fit_standard_error(fit, points)
+
+
 def _refine(model, R: np.ndarray, t: np.ndarray, x: np.ndarray, iterations: int):
     """Poses ``R (h, 3, 3), t (h, 3)`` refined on points ``x (m, 3)`` (model units): ``R, t, error (h,)``."""
     if model.kind == "mesh":
@@ -183,18 +189,21 @@ class Session:
         best = self.result.hypothesis(self.result.best) if self.result.best else None
         return best is not None and all(c for i, c in enumerate(best.consistent) if i not in slipped)
 
+    @property
+    def _floor(self) -> float:
+        """The method's ``floor`` (a fit's mean distance per unit radius on noise-free data), or :data:`FLOOR`."""
+        return getattr(self.recognizer.config, "floor", FLOOR)
+
     def _own_fits(self) -> np.ndarray:
         """Per touch ``(N,)``, data units: the fit its own search reached on its best model, or
         :func:`fit_limit`, whichever is larger."""
-        floor = getattr(self.recognizer.config, "floor", FLOOR)
-        return np.array([max(min([r.error / r.scale for r in rec.ranking if r.ok], default=0.0), fit_limit(f, floor))
-                         for f, rec in zip(self.features, self.solo)])
+        return np.array([max(min([r.error / r.scale for r in rec.ranking if r.ok], default=0.0),
+                             fit_limit(f, self._floor)) for f, rec in zip(self.features, self.solo)])
 
     def _limits(self) -> np.ndarray:
         """Per touch ``(N,)``, data units: the largest mean distance of a fit as good as its own search
         found on any model: within three standard errors of :meth:`_own_fits`."""
-        fits = self._own_fits()
-        return fits + CONSISTENT_SE * np.array([fit_standard_error(e, len(f.points)) for e, f in zip(fits, self.features)])
+        return np.array([_allowed(e, len(f.points)) for e, f in zip(self._own_fits(), self.features)])
 
     def _unexplained(self, slipped: set) -> list[str]:
         """The models step 5 searches again: those whose joint pose is not consistent with every
@@ -203,10 +212,8 @@ class Session:
         what the touch's noise allows, :func:`fit_limit` and three standard errors), its errors
         rule nothing out: every model whose joint pose fails some touch is searched, those it
         deferred unrefined included."""
-        floor = getattr(self.recognizer.config, "floor", FLOOR)
         f = self.features[-1]
-        noise = fit_limit(f, floor)
-        fitted = self._own_fits()[-1] <= noise + CONSISTENT_SE * fit_standard_error(noise, len(f.points))
+        fitted = self._own_fits()[-1] <= _allowed(fit_limit(f, self._floor), len(f.points))
         limit = self._limits()[-1] if fitted else np.inf
         out = []
         for r in self.solo[-1].ranking:
@@ -249,14 +256,12 @@ class Session:
 
     def _consistent(self, name: str, per_touch: np.ndarray) -> np.ndarray:
         """Which touches are consistent with poses whose per-touch errors are ``per_touch (h, N)``."""
-        own, se = [], []
-        floor = getattr(self.recognizer.config, "floor", FLOOR)
+        allowed = []
         for f, rec in zip(self.features, self.solo):
             r = next((r for r in rec.ranking if r.model == name and r.ok), None)
-            fit = max(0.0 if r is None else r.error / r.scale, fit_limit(f, floor))
-            own.append(fit)
-            se.append(fit_standard_error(fit, len(f.points)))
-        return per_touch <= np.array(own)[None] + CONSISTENT_SE * np.array(se)[None]
+            allowed.append(_allowed(max(0.0 if r is None else r.error / r.scale, fit_limit(f, self._floor)),
+                                    len(f.points)))
+        return per_touch <= np.array(allowed)[None]
 
     def _fit_model(self, entry, use: np.ndarray) -> Hypothesis | None:
         """The model's joint pose on the touches ``use (N,)`` (bool): its candidate poses scored on
