@@ -48,12 +48,10 @@ import numpy as np
 from scipy.special import erf
 
 from .probability import planes
+from .session_result import LEADING, MASS
 from .simulation import simulate_world_touch
 
 __all__ = ["Proposal", "propose", "MASS", "LEADING"]
-
-#: the leading hypotheses hold this much probability, and are at most this many
-MASS, LEADING = 0.99, 4
 
 
 @dataclasses.dataclass(frozen=True)
@@ -215,13 +213,7 @@ def propose(session, *, radius: float, tolerance: float = 1.0, angle: float = 60
         raise ValueError("the session has no hypothesis yet: add a touch first")
     rng = np.random.default_rng(rng)
     probs = result.probabilities
-    ranked = sorted(result.ranking, key=lambda h: -probs.get(h.model, 0.0))
-    leading, mass = [], 0.0
-    for h in ranked[:LEADING]:
-        leading.append(h)
-        mass += probs.get(h.model, 0.0)
-        if mass >= MASS:
-            break
+    leading = result.leading()
     hyps = [(h.model, probs.get(h.model, 0.0)) for h in leading]
     if len(leading) < 2:
         return Proposal(None, None, None, 0.0, hyps, "one hypothesis holds the probability: nothing to separate")

@@ -9,7 +9,10 @@ import numpy as np
 
 from .probability import AMBIGUOUS, Evidence
 
-__all__ = ["Hypothesis", "SessionResult"]
+__all__ = ["Hypothesis", "SessionResult", "MASS", "LEADING"]
+
+#: the leading hypotheses of a session hold this much probability, and are at most this many
+MASS, LEADING = 0.99, 4
 
 
 @dataclasses.dataclass(frozen=True)
@@ -98,6 +101,18 @@ class SessionResult:
 
     def hypothesis(self, model: str) -> Hypothesis | None:
         return next((h for h in self.ranking if h.model == model), None)
+
+    def leading(self) -> list[Hypothesis]:
+        """The most probable hypotheses, until they hold :data:`MASS` of the probability, at most
+        :data:`LEADING`: those :func:`tactrec.proposal.propose` separates."""
+        probs = self.probabilities
+        out, mass = [], 0.0
+        for h in sorted(self.ranking, key=lambda h: -probs.get(h.model, 0.0))[:LEADING]:
+            out.append(h)
+            mass += probs.get(h.model, 0.0)
+            if mass >= MASS:
+                break
+        return out
 
     def to_json(self) -> dict:
         """INTERFACE.md's result for a session (``rotation``/``translation`` map the world onto each model)."""
