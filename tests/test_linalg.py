@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from tactrec.linalg import compose, gram, rotate, solve_spd, stable_order, transform
+from tactrec.linalg import clearly_less, compose, gram, rotate, solve_spd, stable_order, transform
 
 
 def test_solve_spd_matches_numpy():
@@ -32,3 +32,11 @@ def test_stable_order_breaks_near_ties_by_index_and_keeps_real_differences():
     assert list(stable_order(w)) == list(stable_order(v))
     assert list(stable_order(np.array([1.0, 1.0 + 1e-6]))) == [0, 1]
     assert list(stable_order(np.array([1.0 + 1e-6, 1.0]))) == [1, 0]   # a real difference still counts
+
+
+def test_clearly_less_ignores_the_last_bits_and_keeps_real_differences():
+    # two equal fits (a symmetric model's mirror poses) rounded either way: neither replaces the other
+    assert not clearly_less(0.0152305661997318, 0.0152305661997303)
+    assert not clearly_less(0.0152305661997282, 0.0152305661997305)
+    assert clearly_less(0.0152, 0.0153) and not clearly_less(0.0153, 0.0152)
+    assert clearly_less(1.0, np.inf) and not clearly_less(np.inf, np.inf)

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["transform", "rotate", "compose", "solve_spd", "gram", "stable_order", "QUANTUM"]
+__all__ = ["transform", "rotate", "compose", "solve_spd", "gram", "stable_order", "clearly_less", "QUANTUM"]
 
 #: relative size of the score bands within which :func:`stable_order` breaks ties by index
 QUANTUM = 1e-9
@@ -84,3 +84,10 @@ def stable_order(values: np.ndarray, *, quantum: float = QUANTUM) -> np.ndarray:
         band = np.floor(np.log(np.maximum(np.where(finite, v, 1.0), 1e-300)) / np.log1p(quantum))
     key = np.where(finite, band, np.inf)
     return np.lexsort((np.arange(len(v)), key))
+
+
+def clearly_less(a: float, b: float, *, quantum: float = QUANTUM) -> bool:
+    """Whether score ``a`` is below ``b`` by more than a factor ``1 + quantum``: a later pose replaces
+    a kept one only then, so two poses that fit equally (a symmetric model's mirror images) are not
+    swapped by the last bits of their scores."""
+    return bool(a * (1.0 + quantum) < b)

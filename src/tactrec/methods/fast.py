@@ -55,12 +55,12 @@ import dataclasses
 
 import numpy as np
 
-from ..linalg import stable_order
+from ..linalg import clearly_less
 from ..probability import fit_limit
 from ..registration import closedform_fast, mesh_fast
 from ..registration.result import Registration
 from .base import NOT_SEARCHED, Config, SearchOutcome
-from .common import best_of_orientations, in_model_units
+from .fast_stages import _cheap, _closed_form, _polished, _refined, _span
 
 __all__ = ["FastMethod", "FastConfig", "Tier", "TIERS"]
 
@@ -124,130 +124,6 @@ class FastConfig(Config):
         for name in ("spread", "ratio", "umbilic", "floor", "plausible", "tolerance"):
             self._check(name, np.isfinite(getattr(self, name)) and getattr(self, name) > 0, "a positive number")
         self._check("ratio", self.ratio >= 1.0, "at least 1")
-
-
-# ---------------------------------------------------------------------- stages (in worker processes)
-def _places(held, index: int, touch, sign: int, config: FastConfig, every: bool):
-    """The model's places in order for this touch and normal, computed once per touch."""
-    key = (touch.key, index, sign, every)
-    if key not in held.cache:
-        if len(held.cache) > 4 * len(held.entries) + 8:           # another touch: forget the last one's
-            held.cache.clear()
-        model = held.entries[index].model
-        g = touch.oriented(sign)
-        chosen, _, fit = mesh_fast.places(model, g, touch.points, touch.radius, spread=config.spread)
-        if every:
-            field = model.fine_curvatures
-            chosen = stable_order(np.hypot(field.k1 - fit[0][0], field.k2 - fit[0][1]))
-        held.cache[key] = (chosen, fit)
-    return held.cache[key]
-
-
-def _span(tiers, k: int) -> tuple[int, int | None]:
-    """Which of the ranked places tier ``k`` adds: those past the deepest earlier tier of the same kind."""
-    tier = tiers[k]
-    start = max((t.places or 0 for t in tiers[:k] if (t.rotations, t.tilt) == (tier.rotations, tier.tilt)),
-                default=0)
-    return start, tier.places
-
-
-def _cheap(held, indices, touch, config: FastConfig, k: int) -> list[dict]:
-    """Step 1 of tier ``k`` on each mesh model: its best ``refine`` poses and their cheap scores."""
-    tier = config.tiers[k]
-    out = []
-    for index in indices:
-        model = held.entries[index].model
-        t = in_model_units(touch, model)
-        if t.radius > model.size or t.joint_reach > model.size:
-            out.append({"rejected": "the touch is larger than the model", "queries": 0})
-            continue
-        x = t.joint_subset(config.coarse_points)
-        poses, queries, tried = [], 0, 0
-        for sign, g in zip((1, -1), t.orientations):
-            chosen, fit = _places(held, index, t, sign, config, tier.places is None)
-            start, stop = _span(config.tiers, k)
-            for lo in range(start, len(chosen) if stop is None else min(stop, len(chosen)), 1000):
-                part = chosen[lo:min(lo + 1000, len(chosen) if stop is None else stop)]
-                tried += len(part)
-                R, tr, owner = mesh_fast.frame_poses(model, g, part, fit, rotations=tier.rotations,
-                                                     umbilic=config.umbilic / t.radius, tilt=tier.tilt)
-                steps = config.cheap_steps
-                kept = max(config.screen, len(R) // 8)
-                if tier.places is not None and len(R) > kept and steps > 1:
-                    R, tr, first, q = mesh_fast.refine(model, R, tr, x, iterations=1, predict=True)
-                    keep = stable_order(first)[:kept]
-                    R, tr, owner, steps, queries = R[keep], tr[keep], owner[keep], steps - 1, queries + q
-                R, tr, score, q = mesh_fast.refine(model, R, tr, x, iterations=steps, predict=True,
-                                                   tolerance=config.tolerance)
-                queries += q
-                order = np.lexsort((stable_order(score).argsort(), owner))          # each place's best rotation
-                best = order[np.r_[True, owner[order][1:] != owner[order][:-1]]]
-                poses.append((R[best], tr[best], score[best], np.full(len(best), sign)))
-        if not poses:
-            out.append({"rejected": "no place to start from", "queries": queries, "places": tried})
-            continue
-        R, tr, score, signs = (np.concatenate([p[i] for p in poses]) for i in range(4))
-        keep = stable_order(score)[:config.refine]
-        out.append({"R": R[keep], "t": tr[keep], "score": score[keep] / t.scale, "sign": signs[keep],
-                    "queries": queries, "places": tried})
-    return out
-
-
-def _registration(model, touch, R: np.ndarray, t: np.ndarray, error: float, sign: int) -> Registration:
-    """The registration of pose ``R (3, 3), t (3,)`` on a mesh, with the normal of sign ``sign``."""
-    return mesh_fast.registration(model, touch.oriented(sign), R, t, error, candidates=0, sign=sign, scale=touch.scale,
-                                  x=touch.joint_points)
-
-
-def _refined(held, indices, touch, config: FastConfig, chosen: list[dict]) -> list[dict]:
-    """Step 3 on each model: the chosen poses refined on exact distances; the best as a registration."""
-    out = []
-    for index, poses in zip(indices, chosen):
-        model = held.entries[index].model
-        t = in_model_units(touch, model)
-        R, tr, error, q1 = mesh_fast.refine(model, poses["R"], poses["t"], t.joint_subset(3 * config.coarse_points),
-                                           iterations=config.iterations, tolerance=config.tolerance)
-        order = stable_order(error)
-        b = order[0]
-        others = np.concatenate([R[order], tr[order][:, :, None]], axis=2)                 # (k, 3, 4), best first
-        R, tr, error, q2 = mesh_fast.refine(model, R[b:b + 1], tr[b:b + 1], t.joint_points, iterations=2,
-                                           tolerance=config.tolerance)
-        found = _registration(model, t, R[0], tr[0], error[0], int(poses["sign"][b]))
-        out.append({"registration": dataclasses.replace(found, alternatives=others), "queries": q1 + q2})
-    return out
-
-
-def _polished(held, indices, touch, config: FastConfig, registrations: list[Registration]) -> list[dict]:
-    """The registrations refined further on all points (kept where that lowers the error)."""
-    out = []
-    for index, r in zip(indices, registrations):
-        model = held.entries[index].model
-        t = in_model_units(touch, model)
-        if model.kind == "mesh":
-            R, tr, error, q = mesh_fast.refine(model, r.rotation[None], r.translation[None], t.joint_points,
-                                               iterations=config.polish_iterations, tolerance=config.tolerance)
-            better = dataclasses.replace(_registration(model, t, R[0], tr[0], error[0], r.normal_sign),
-                                         alternatives=r.alternatives) if error[0] < r.error else r
-        else:
-            better = dataclasses.replace(closedform_fast.polish(model, r, t.oriented(r.normal_sign),
-                                                                t.joint_points),
-                                         normal_sign=r.normal_sign, scale=r.scale)
-            q = config.polish_iterations * len(t.joint_points)
-        out.append({"registration": better, "queries": q})
-    return out
-
-
-def _closed_form(held, indices, touch, config: FastConfig) -> list[dict]:
-    """Closed-form surfaces: the nearest table rows, refined in six degrees of freedom."""
-    out = []
-    for index in indices:
-        entry = held.entries[index]
-        t = in_model_units(touch, entry.model)
-        r = best_of_orientations(lambda g: closedform_fast.register(entry.model, entry.table, g, t.joint_points,
-                                                                    candidates=config.candidates), t,
-                                 entry.model.name)
-        out.append({"registration": r, "queries": config.candidates * 12 * len(t.joint_points)})
-    return out
 
 
 # ---------------------------------------------------------------------- the search
@@ -405,7 +281,7 @@ class FastMethod:
         order = sorted(chosen)
         for i, found in zip(order, runner.map(_refined, order, touch, config, items=[chosen[i] for i in order])):
             work += found["queries"]
-            if _error(found["registration"]) < state.error(i):
+            if clearly_less(_error(found["registration"]), state.error(i)):
                 state.best[i] = found["registration"]
         return work
 
