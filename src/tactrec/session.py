@@ -63,7 +63,7 @@ import numpy as np
 from .errors import InputError
 from .io.session import SessionTouch, rigid_pose
 from .io.touch import TactileData
-from .linalg import transform
+from .linalg import clearly_less, transform
 from .probability import evidence, fit_limit, fit_standard_error, planes, residuals
 from .session_result import Hypothesis, SessionResult
 
@@ -278,13 +278,14 @@ class Session:
         per = self._per_touch(model, R, t, scale)                                         # (h, N)
         x = np.concatenate([f.points for f, u in zip(self.features, use) if u]) * scale
         best = None
-        for k in np.argsort(per @ weight, kind="stable")[:REFINED]:
+        total = (per * weight).sum(axis=1)                  # element-wise: no BLAS kernel in the ranking
+        for k in np.argsort(total, kind="stable")[:REFINED]:
             Rk, tk, _ = _refine(model, R[k:k + 1], t[k:k + 1], x, JOINT_ITERATIONS)
             per_k = self._per_touch(model, Rk, tk, scale)[0]
-            if not per_k @ weight <= per[k] @ weight:                      # keep the start if not better
+            if not (per_k * weight).sum() <= total[k]:                        # keep the start if not better
                 Rk, tk, per_k = R[k:k + 1], t[k:k + 1], per[k]
-            err = float(per_k @ weight / max(weight.sum(), 1))
-            if best is None or err < best.error:
+            err = float((per_k * weight).sum() / max(weight.sum(), 1))
+            if best is None or clearly_less(err, best.error):
                 best = Hypothesis(name, Rk[0], tk[0], scale, err, per_k,
                                   tuple(bool(c) for c in self._consistent(name, per_k[None])[0]))
         return best

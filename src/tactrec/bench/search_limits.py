@@ -34,7 +34,8 @@ from scipy.spatial.transform import Rotation
 from ..features import Touch
 from ..io.atomic import write_text_atomic
 from ..methods import get_method
-from ..methods.fast import TIERS, _span, _tier_cost, fit_limit
+from ..methods.fast import TIERS, _tier_cost, fit_limit
+from ..methods.fast_stages import _span
 from ..registration import mesh_fast
 from ..surfaces import BUILTIN_SETS
 from .common import instance_rng, run_parallel, write_json

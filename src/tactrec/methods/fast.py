@@ -22,9 +22,11 @@ crease, where the estimated normal is off).  A tier on a set of models is
 
 The first tier runs on every model.  Each later round runs the next tier of
 the models in contention (:meth:`_State.contending`): those whose best score
-lies within ``ratio`` x the best error (all while nothing fits plausibly,
-below ``plausible`` x the touch's radius); the leader alone once it is clear
-of all others by that factor, to fit its pose; the deferred models, shallowest
+lies within ``ratio`` x the best error (all while the best is not a plausible
+fit, more than ``within`` standard errors above the fit limit: then the true
+pose was missed somewhere, and no model's first tiers rule it out);
+the leader alone once it is a plausible fit clear of all others by that
+factor, to fit its pose; the deferred models, shallowest
 tier first, when none contends.  The search stops (:meth:`_State.settled`)
 when the best error is a *fit*: within what the data's own noise allows (the
 mean distance of a perfect fit, ``sigma sqrt(2 / pi)``, ``sigma`` from the
@@ -56,7 +58,7 @@ import dataclasses
 import numpy as np
 
 from ..linalg import clearly_less
-from ..probability import fit_limit
+from ..probability import fit_limit, fit_standard_error
 from ..registration import closedform_fast, mesh_fast
 from ..registration.result import Registration
 from .base import NOT_SEARCHED, Config, SearchOutcome
@@ -107,7 +109,7 @@ class FastConfig(Config):
     polish_iterations: int = 10
     umbilic: float = 0.05
     floor: float = 1e-3
-    plausible: float = 1e-2
+    within: float = 3.0
     tolerance: float = 1e-5
     candidates: int = closedform_fast.DEFAULTS["candidates"]
 
@@ -121,7 +123,7 @@ class FastConfig(Config):
             self._check(name, isinstance(value, (int, np.integer)) and value >= (0 if name == "polish" else 1),
                         "a whole number >= 1")
         self._check("coarse_points", self.coarse_points >= 3, "at least 3")
-        for name in ("spread", "ratio", "umbilic", "floor", "plausible", "tolerance"):
+        for name in ("spread", "ratio", "umbilic", "floor", "within", "tolerance"):
             self._check(name, np.isfinite(getattr(self, name)) and getattr(self, name) > 0, "a positive number")
         self._check("ratio", self.ratio >= 1.0, "at least 1")
 
@@ -157,6 +159,9 @@ class _State:
         self.next = {i: 0 for i in meshes}
         self.sizes = {i: len(models[i].model.vertices) for i in meshes}
         self.limit = max(fit_limit(touch, config.floor), touch.fit)      # a caller's joint fit, with a context
+        # a best error this far above the limit may still be a fit under the noise; beyond it the true
+        # pose was missed somewhere, and no model's first tiers rule it out
+        self.plausible = self.limit + config.within * fit_standard_error(self.limit, len(touch.joint_points))
 
     def error(self, i: int) -> float:
         return _error(self.best.get(i))
@@ -174,10 +179,10 @@ class _State:
         return [i for i in self.next if i not in self.rejected and self.next[i] < len(self.config.tiers)]
 
     def clear(self) -> bool:
-        """Whether the best is plausible (below ``plausible`` x the touch's radius) and every other
-        model's standing lies beyond ``ratio`` x its error."""
+        """Whether the best is a plausible fit (within ``within`` standard errors of the fit limit) and
+        every other model's standing lies beyond ``ratio`` x its error."""
         leader, e1 = self.leader()
-        if leader is None or not np.isfinite(e1) or e1 > self.config.plausible * self.touch.radius:
+        if leader is None or not np.isfinite(e1) or e1 > self.plausible:
             return False
         return all(self.standing(i) > self.config.ratio * e1 for i in set(self.cheapest) | set(self.best)
                    if i != leader)
@@ -191,7 +196,7 @@ class _State:
         leader, e1 = self.leader()
         if self.clear():
             return [leader] if leader in waiting else []
-        if not np.isfinite(e1) or e1 > self.config.plausible * self.touch.radius:
+        if not np.isfinite(e1) or e1 > self.plausible:
             near = waiting
         else:
             near = [i for i in waiting if self.standing(i) <= self.config.ratio * max(e1, self.limit)]
