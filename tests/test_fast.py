@@ -525,3 +525,31 @@ def test_search_limits_bench_measures_the_index_and_the_basin(tmp_path):
     assert sum(s["tiers"].values()) == 4
     assert all(r["rank"] >= 0 and r["tier"] for r in table["records"])
     assert "| p3 |" in (tmp_path / "search-limits.md").read_text()
+
+
+def test_every_model_contends_while_the_best_is_not_a_fit_within_the_noise():
+    """The search's contention rule (``fast._State``): a best error within ``within`` standard errors
+    of the fit limit is plausible, and a leader that far ahead of the others' standings goes on
+    alone; a best error beyond it means the true pose was missed somewhere, so the leader is not
+    clear however far ahead, and every waiting model takes its next tier."""
+    from types import SimpleNamespace
+
+    from tactrec.methods import get_method
+    from tactrec.methods.fast import _State
+    from tactrec.probability import fit_limit, fit_standard_error
+    from tactrec.registration.result import Registration
+
+    config = get_method("fast").configure()
+    touch = SimpleNamespace(noise=0.0, radius=12.0, fit=0.0, joint_points=np.zeros((90, 3)))
+    models = [SimpleNamespace(model=SimpleNamespace(vertices=np.zeros((100, 3)))) for _ in range(3)]
+    limit = fit_limit(touch, config.floor)
+    plausible = limit + config.within * fit_standard_error(limit, 90)
+    for error, clear in ((0.99 * plausible, True), (1.01 * plausible, False), (0.5 * limit, True)):
+        state = _State(touch, models, [0, 1, 2], config)
+        state.best[0] = Registration(model="a", error=error)
+        state.next = {0: 1, 1: 1, 2: 1}
+        state.cheapest = {0: error, 1: 10 * error, 2: 20 * error}
+        state.deferred = {1: 10 * error, 2: 20 * error}
+        assert state.clear() is clear
+        assert state.contending() == ([0] if clear else [0, 1, 2])
+        assert state.settled() == bool(error <= limit)          # the leader has tiers left: only a fit settles
