@@ -43,6 +43,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..features import Touch
 from ..io.atomic import write_text_atomic
 from ..simulation import random_rigid_motion, sensor_to_world, simulate_world_touch
 from ..surfaces import BUILTIN_SETS
@@ -82,7 +83,8 @@ def _first(kind: str, m_index: int, instance: int, seed: int):
 
 
 def _next_touch(strategy, session, entry, world2model, spec, rng):
-    """The next touch's data and ``sensor2world`` pose, or None (nothing to propose / no place)."""
+    """The next touch's data and ``sensor2world`` pose, or None (nothing to propose / no place).  A place
+    whose simulated touch the estimator rejects (curves tangent at the contact, say) is no place."""
     points = int(round(spec["length"] / SPACING)) + 1
     if strategy == "next":
         proposal = session.next(radius=RADIUS, angle=spec["angle"], rng=rng)
@@ -112,10 +114,12 @@ def _next_touch(strategy, session, entry, world2model, spec, rng):
             b = a + np.deg2rad(spec["angle"])
             directions = np.stack([np.cos(a) * d1 + np.sin(a) * d2, np.cos(b) * d1 + np.sin(b) * d2])
         try:
-            return simulate_world_touch(entry.model, world2model, contact, directions, points=points,
-                                        spacing=SPACING, noise=spec["noise"], outward=spec["outward"], rng=rng)
-        except ValueError:
+            found = simulate_world_touch(entry.model, world2model, contact, directions, points=points,
+                                         spacing=SPACING, noise=spec["noise"], outward=spec["outward"], rng=rng)
+            Touch.from_data(found[0], **session.recognizer.estimation)   # data the estimator takes, or not a place
+        except ValueError:                              # InputError included
             continue
+        return found
     return None
 
 
