@@ -167,7 +167,7 @@ class Session:
         pose fits the touches as well as their own searches fit each."""
         use = [i for i in range(len(self.features)) if i not in slipped]
         sizes = np.array([len(self.features[i].points) for i in use])
-        fit = float(sizes @ self._own_fits()[use] / sizes.sum())
+        fit = float((sizes * self._own_fits()[use]).sum() / sizes.sum())      # element-wise: no BLAS kernel
         for start in use[::-1][:STARTS]:
             if self._explained(slipped):
                 return
