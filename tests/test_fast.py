@@ -236,6 +236,28 @@ def test_the_budget_bounds_the_work_and_an_unsettled_search_says_so(scans):
     assert deeper.depth > 1 and deeper.work > r.work
 
 
+def test_a_callers_budget_caps_the_search_as_the_methods_own_budget_would(scans):
+    """Hard touches on two scans searched with a caller's budget in all (a session's step 5 passes
+    one) and by a recognizer whose own budget per model and normal comes to the same: the same
+    rankings, depths and work; and a budget of one query stops every search after its first round."""
+    entries = scans.entries[:2]
+    per_model = 20_000
+    with Recognizer(entries) as free, Recognizer(entries, budget=per_model) as bounded:
+        depths = []
+        for m_index, entry in enumerate(entries):
+            for i in range(4):
+                _, touch = _simulate(entry, m_index, i, 11, "hard")
+                own = bounded.recognize(touch)
+                cap = per_model * len(entries) * len(own.touch.orientations)
+                given = free.recognize(touch, budget=cap)
+                assert [(r.model, r.error) for r in given.ranking] == [(r.model, r.error) for r in own.ranking]
+                assert (given.depth, given.work, given.settled) == (own.depth, own.work, own.settled)
+                assert given.allowed == own.allowed == cap
+                assert free.recognize(touch, budget=1).depth == 1
+                depths.append(own.depth)
+    assert max(depths) > 1, "every search stopped after one round anyway: the check above is vacuous"
+
+
 def test_a_search_with_other_touches_in_its_score_tries_the_poses_the_budget_allows_the_touch(scans):
     """Noisy touches of the mug searched on their own and with two nearby touches' curves in their
     score (a session's step 5), under a small budget: the budget bounds the poses tried, so the

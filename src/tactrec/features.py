@@ -130,10 +130,11 @@ class Touch:
 
     @cached_property
     def key(self) -> str:
-        """A digest of the points, the estimate and the scale: names this touch in caches."""
+        """A digest of the touch's own points, the estimate and the scale: names what depends on the
+        touch alone in caches (its places on a model: a context plays no part in them)."""
         import hashlib
 
-        h = hashlib.sha1(np.ascontiguousarray(self.joint_points).tobytes())
+        h = hashlib.sha1(np.ascontiguousarray(self.points).tobytes())
         h.update(np.ascontiguousarray(self.geometry.normal).tobytes())
         h.update(np.float64(self.scale).tobytes())
         return h.hexdigest()

@@ -72,6 +72,8 @@ class Recognition:
         How many steps of its schedule the method's search ran.
     touch : Touch or None
         The touch as recognition saw it (points, estimate, noise), for callers that go on with it.
+    allowed : int or None
+        The most work the search could spend (``fast``: its budget; None for a method without one).
     """
 
     best: str | None
@@ -84,6 +86,7 @@ class Recognition:
     work: int = 0
     depth: int = 1
     touch: Touch | None = None
+    allowed: int | None = None
 
     @functools.cached_property
     def probabilities(self) -> dict[str, float]:
@@ -275,13 +278,15 @@ class Recognizer:
 
         return Session(self)
 
-    def recognize(self, data: TactileData, *, context=(), among=None, fit: float = 0.0) -> Recognition:
+    def recognize(self, data: TactileData, *, context=(), among=None, fit: float = 0.0,
+                  budget: int | None = None) -> Recognition:
         """Recognise one touch (Section 3.3).  ``context``: curves of other touches of the same object
         in the same frame, which the poses must fit too (a method that searches from this touch's
         local geometry scores its poses on them; see :class:`~tactrec.features.Touch`), and ``fit``
         the mean distance over all those points that counts as a fit (0: this touch's own limit).
         ``among``: the names of the models to search (None: all); the others are rejected as not
-        searched."""
+        searched.  ``budget``: the most work (closest-point queries) the search may spend in all, when
+        lower than the method's own budget; the first round runs whatever it costs."""
         start = time.perf_counter()
         touch = Touch.from_data(data, **self.estimation)
         if len(context):
@@ -292,14 +297,15 @@ class Recognizer:
             if unknown:
                 raise InputError(f"no model named {unknown[0]!r} among the recognizer's", "among")
             chosen = [i for i, entry in enumerate(self.models) if entry.name in set(among)]
-        outcome = self.method.search(touch, self.models, self.config, self.runner, among=chosen)
+        outcome = self.method.search(touch, self.models, self.config, self.runner, among=chosen,
+                                     budget=budget)
         ranking = sorted(outcome.ranking, key=_rank_key)
         best = ranking[0].model if ranking and ranking[0].ok else None
         ok = [r for r in ranking if r.ok]
         found = evidence([r.model for r in ok], [self._residuals(r, touch) for r in ok],
                          [len(c) for c in touch.joint_curves], touch.noise)
         return Recognition(best, ranking, touch.estimate, time.perf_counter() - start, self.method.name, found,
-                           outcome.settled, outcome.work, outcome.depth, touch)
+                           outcome.settled, outcome.work, outcome.depth, touch, outcome.allowed)
 
     def _residuals(self, r: Registration, touch: Touch) -> np.ndarray:
         """The data's signed distances (data units) to the model of ``r`` under its pose."""

@@ -67,12 +67,15 @@ class SearchOutcome:
         Closest-point queries (or the method's own unit of work) spent.
     depth : int
         How many steps of its schedule the search ran (1 for a method without one).
+    allowed : int or None
+        The most work the search could spend (its budget; None for a method without one).
     """
 
     ranking: list
     settled: bool = True
     work: int = 0
     depth: int = 1
+    allowed: int | None = None
 
 
 class Runner(Protocol):
@@ -96,7 +99,8 @@ class Method(Protocol):
     def prepare(self, model) -> None: ...
 
     def search(self, touch, models: Sequence, config: Config, runner: Runner, *,
-               among: Sequence[int] | None = None) -> SearchOutcome:
+               among: Sequence[int] | None = None, budget: int | None = None) -> SearchOutcome:
         """One registration per model of ``models``; only those at the indices ``among`` are searched
-        (all when None), the others are rejected as not searched."""
+        (all when None), the others are rejected as not searched.  ``budget``: at most this much work
+        in all, when lower than the method's own budget (a method without a budget ignores it)."""
         ...

@@ -37,10 +37,11 @@ its own tiers have run; or when nothing is left.  ``among`` limits a search
 to chosen models (the budget counts those alone).  It also stops before a round whose estimated cost would take the
 work (closest-point queries) past ``budget`` per model; such a search is
 reported as not settled (the budget counts per model and per normal tried:
-twice as much without an ``outward`` hint).  A round's cost is counted on the
-touch's own curves, so the budget bounds the poses tried: a search with other
-touches in its score (a session's) tries as many as the touch alone would and
-spends queries in proportion to the points it scores.  The best ``polish`` models then take
+twice as much without an ``outward`` hint; a caller may give a lower one in
+all).  A round's cost is counted on the touch's own curves, so the budget
+bounds the poses tried: a search with other touches in its score (a
+session's) tries as many as the touch alone would and spends queries in
+proportion to the points it scores.  The best ``polish`` models then take
 ``polish_iterations`` more steps on all points.
 
 Every cut in a ranked list (screen, rotations, refinement) orders near-equal
@@ -231,7 +232,7 @@ class FastMethod:
         if model.kind == "mesh":
             mesh_fast.prepare(model)
 
-    def search(self, touch, models, config: FastConfig, runner, *, among=None) -> SearchOutcome:
+    def search(self, touch, models, config: FastConfig, runner, *, among=None, budget=None) -> SearchOutcome:
         chosen = range(len(models)) if among is None else sorted(among)
         meshes = [i for i in chosen if models[i].model.kind == "mesh"]
         others = [i for i in chosen if models[i].model.kind != "mesh"]
@@ -240,6 +241,8 @@ class FastMethod:
         for i, found in zip(others, runner.map(_closed_form, others, touch, config)):
             state.best[i], work = found["registration"], work + found["queries"]
         signs = len(touch.orientations)
+        allowed = config.budget * len(chosen) * signs
+        allowed = allowed if budget is None else min(allowed, budget)
         while True:
             if state.settled():
                 settled = True
@@ -251,14 +254,14 @@ class FastMethod:
             k = state.next[group[0]]
             group = [i for i in group if state.next[i] == k]
             cost = sum(_tier_cost(config, k, signs, state.sizes[i], len(touch.curves)) for i in group)
-            if work > 0 and work + cost > config.budget * len(chosen) * signs:
+            if work > 0 and work + cost > allowed:
                 break
             depth = max(depth, k + 1)
             work += self._tier(state, group, k, runner)
         top = [i for i in sorted(state.best, key=lambda i: (state.error(i), i)) if state.best[i].ok][:config.polish]
         for i, found in zip(top, runner.map(_polished, top, touch, config, items=[state.best[i] for i in top])):
             state.best[i], work = found["registration"], work + found["queries"]
-        return SearchOutcome(self._ranking(state, models), settled, int(work), depth)
+        return SearchOutcome(self._ranking(state, models), settled, int(work), depth, int(allowed))
 
     @staticmethod
     def _tier(state: _State, group: list[int], k: int, runner) -> int:

@@ -105,7 +105,8 @@ class PaperMethod:
     def prepare(self, model) -> None:
         """Nothing beyond the lookup table, which the database holds."""
 
-    def search(self, touch, models, config: PaperConfig, runner, *, among=None) -> SearchOutcome:
+    def search(self, touch, models, config: PaperConfig, runner, *, among=None, budget=None) -> SearchOutcome:
+        """Every model at ``among`` (all when None) searched in full: the paper's method has no budget."""
         own = config.geometry(touch.data)          # this reading's estimate, once for every model
         if own is not None:
             touch = dataclasses.replace(touch, estimate=own)
