@@ -11,7 +11,9 @@ touch and a joint refinement (more searches only in step 5):
    poses along its free motions, where they were computed) and the new
    touch's poses on it (the best and the others its search refined); each is
    scored on all touches' points, and the best two are refined jointly
-   (point-to-plane Gauss-Newton on every point of every touch kept);
+   (point-to-plane Gauss-Newton on every point of every touch kept;
+   :mod:`tactrec.session_fit`, in the recognizer's worker processes); within one add, a model is fitted again
+   after a search of step 5 only from its fit and that search's poses;
 3. a touch is *consistent* with a pose when its mean distance under it is
    within three standard errors of its own fit on that model, or of the
    largest mean distance still a fit (:func:`tactrec.probability.fit_limit`:
@@ -42,8 +44,12 @@ touch and a joint refinement (more searches only in step 5):
    needs no other.  When the new touch's own search fitted no model (its
    best error beyond ``fit_limit`` and three standard errors), its errors
    rule nothing out and every model whose pose does not fit every touch is
-   covered.  Each search may try as many poses per model as the touch's own
-   search, each scored on every touch, and it stops once its best pose fits
+   covered.  The joint stage of an add has one touch's budget: its joint
+   fits and these searches together spend at most the closest-point queries
+   the new touch's own search was allowed (a search's work counted on every
+   point it scores; a search starts only while some is left, and its first
+   round always runs), so an add costs at most about two searches of
+   one touch that run to their budget.  Each search stops once its best pose fits
    the touches as well as their own searches fit each (the points-weighted
    mean of each touch's best fit on any model, or of ``fit_limit``,
    whichever is larger): the joint form of the single search's rule, with
@@ -63,8 +69,9 @@ import numpy as np
 from .errors import InputError
 from .io.session import SessionTouch, rigid_pose
 from .io.touch import TactileData
-from .linalg import clearly_less, transform
+from .linalg import clearly_less
 from .probability import evidence, fit_limit, fit_standard_error, planes, residuals
+from .session_fit import fit_stage, per_touch, refine
 from .session_result import Hypothesis, SessionResult
 
 
@@ -74,8 +81,6 @@ __all__ = ["Session", "SessionResult", "Hypothesis", "CONSISTENT_SE"]
 CONSISTENT_SE = 3.0
 #: on noise-free data a fit is within this fraction of the touch's radius, for a method without a ``floor`` of its own
 FLOOR = 1e-3
-#: Gauss-Newton steps of a joint refinement, and how many candidate poses per model are refined
-JOINT_ITERATIONS, REFINED = 15, 2
 #: poses kept per model (the best and others the touches fit as well), and how far apart their contacts must be
 #: (a fraction of the touches' reach)
 FAMILY, APART = 5, 0.5
@@ -91,18 +96,6 @@ def _allowed(fit: float, points: int) -> float:
     """The largest mean distance as good as a fit of ``fit`` over ``points`` points: within
     :data:`CONSISTENT_SE` of its standard errors."""
     return fit + CONSISTENT_SE * fit_standard_error(fit, points)
-
-
-def _refine(model, R: np.ndarray, t: np.ndarray, x: np.ndarray, iterations: int):
-    """Poses ``R (h, 3, 3), t (h, 3)`` refined on points ``x (m, 3)`` (model units): ``R, t, error (h,)``."""
-    if model.kind == "mesh":
-        from .registration import mesh_fast
-
-        R, t, error, _ = mesh_fast.refine(model, R, t, x, iterations=iterations)
-        return R, t, error
-    from .registration import closedform_fast
-
-    return closedform_fast.refine(model, R, t, x, iterations=iterations)
 
 
 def _normals(model, points: np.ndarray) -> np.ndarray:
@@ -132,6 +125,8 @@ class Session:
         self.solo: list = []                   # each touch's own Recognition (world frame)
         self.features: list = []
         self._joint: dict[str, Hypothesis] = {}
+        self._fits: dict[bytes, dict[str, Hypothesis]] = {}   # this add's fits, per set of touches used
+        self._fit_work = 0                      # this add's closest-point queries in joint fits
         self.result: SessionResult | None = None
 
     def add(self, data: TactileData, sensor2world=None) -> SessionResult:
@@ -154,6 +149,7 @@ class Session:
         self.solo.append(rec)
         self.searches = [rec]
         self.features.append(rec.touch)
+        self._fits, self._fit_work = {}, 0
         self.result = self._joint_fit()
         if self.joint_search and earlier and self.recognizer.method.scores_context:
             self._search_jointly(slipped)
@@ -164,12 +160,15 @@ class Session:
         """Step 5: while no pose found fits every touch kept, search again from one of them, scoring
         poses on all: the new touch, then the one kept before it (:data:`STARTS`).  Each search covers
         the models the new touch fits on its own whose pose does not fit them all, and stops once a
-        pose fits the touches as well as their own searches fit each."""
+        pose fits the touches as well as their own searches fit each; with the add's joint fits they
+        spend at most the work the new touch's own search was allowed (closest-point queries)."""
         use = [i for i in range(len(self.features)) if i not in slipped]
         sizes = np.array([len(self.features[i].points) for i in use])
         fit = float((sizes * self._own_fits()[use]).sum() / sizes.sum())      # element-wise: no BLAS kernel
+        own = self.solo[-1]
+        left = (own.work if own.allowed is None else own.allowed) - self._fit_work
         for start in use[::-1][:STARTS]:
-            if self._explained(slipped):
+            if self._explained(slipped) or left <= 0:
                 return
             among = self._unexplained(slipped)
             if not among:
@@ -177,9 +176,12 @@ class Session:
             # a search that stopped at a pose the other touches rule out may reach the truth from
             # another touch, whose places rank by other curvatures
             context = [c for i in use if i != start for c in self.world[i].curves]
-            self.searches.append(self.recognizer.recognize(self.world[start], context=context, among=among,
-                                                           fit=fit))
-            self.result = self._joint_fit()
+            found = self.recognizer.recognize(self.world[start], context=context, among=among, fit=fit,
+                                              budget=left)
+            self.searches.append(found)
+            done = self._fit_work
+            self.result = self._joint_fit(found)
+            left -= found.work + self._fit_work - done
 
     def _explained(self, slipped: set) -> bool:
         """Whether the best model's joint pose is consistent with every touch but those ``slipped``
@@ -232,13 +234,16 @@ class Session:
 
     # -- the joint fit --------------------------------------------------------------------------
 
-    def _candidates(self, name: str) -> list[tuple[np.ndarray, np.ndarray, float]]:
+    def _candidates(self, name: str, start: Hypothesis | None = None,
+                    searches=None) -> list[tuple[np.ndarray, np.ndarray, float]]:
+        """Model ``name``'s candidate poses ``(R, t, scale)``: ``start``'s pose (default: its joint pose
+        so far, with its family where computed), then the poses of ``searches`` (default: this add's)."""
         poses = []
-        if name in self._joint:
-            h = self._joint[name]
+        h = self._joint.get(name) if start is None else start
+        if h is not None:
             family = h.poses if h.poses is not None else [np.concatenate([h.rotation, h.translation[:, None]], 1)]
             poses += [(pose[:, :3], pose[:, 3], h.scale) for pose in family]
-        for rec in self.searches:
+        for rec in self.searches if searches is None else searches:
             r = next((r for r in rec.ranking if r.model == name and r.ok), None)
             if r is not None:
                 poses.append((r.rotation, r.translation, r.scale))
@@ -248,11 +253,7 @@ class Session:
 
     def _per_touch(self, model, R, t, scale) -> np.ndarray:
         """Mean distance of each touch's points under poses ``R (h, 3, 3), t (h, 3)``: ``(h, N)``, data units."""
-        out = []
-        for f in self.features:
-            d = model.distance(transform(R, t, f.points * scale)) / scale
-            out.append(np.mean(d, axis=1))
-        return np.stack(out, axis=1)
+        return per_touch(model, R, t, [f.points for f in self.features], scale)
 
     def _consistent(self, name: str, per_touch: np.ndarray) -> np.ndarray:
         """Which touches are consistent with poses whose per-touch errors are ``per_touch (h, N)``."""
@@ -263,32 +264,37 @@ class Session:
                                     len(f.points)))
         return per_touch <= np.array(allowed)[None]
 
-    def _fit_model(self, entry, use: np.ndarray) -> Hypothesis | None:
-        """The model's joint pose on the touches ``use (N,)`` (bool): its candidate poses scored on
-        them, the best :data:`REFINED` refined on their points, the best kept."""
-        model, name = entry.model, entry.name
-        poses = self._candidates(name)
-        if not poses:
-            return None
-        scale = poses[0][2]
-        R = np.stack([p[0] for p in poses])
-        t = np.stack([p[1] for p in poses])
-        sizes = np.array([len(f.points) for f in self.features])
-        weight = sizes * use
-        per = self._per_touch(model, R, t, scale)                                         # (h, N)
-        x = np.concatenate([f.points for f, u in zip(self.features, use) if u]) * scale
-        best = None
-        total = (per * weight).sum(axis=1)                  # element-wise: no BLAS kernel in the ranking
-        for k in np.argsort(total, kind="stable")[:REFINED]:
-            Rk, tk, _ = _refine(model, R[k:k + 1], t[k:k + 1], x, JOINT_ITERATIONS)
-            per_k = self._per_touch(model, Rk, tk, scale)[0]
-            if not (per_k * weight).sum() <= total[k]:                        # keep the start if not better
-                Rk, tk, per_k = R[k:k + 1], t[k:k + 1], per[k]
-            err = float((per_k * weight).sum() / max(weight.sum(), 1))
-            if best is None or clearly_less(err, best.error):
-                best = Hypothesis(name, Rk[0], tk[0], scale, err, per_k,
-                                  tuple(bool(c) for c in self._consistent(name, per_k[None])[0]))
-        return best
+    def _fit_models(self, use: np.ndarray, fresh=None) -> dict[str, Hypothesis]:
+        """Every model's joint pose on the touches ``use (N,)`` (bool): its candidate poses scored on
+        them, the best :data:`~tactrec.session_fit.REFINED` refined on their points
+        (:func:`~tactrec.session_fit.fit_stage`, in the recognizer's workers), the best kept.  A model
+        already fitted on these touches in this add is fitted again only from that fit and the poses
+        of ``fresh`` (the search just made): the other candidates lost to it on the same points."""
+        done = self._fits.setdefault(use.tobytes(), {})
+        entries, items = [], []
+        for i, e in enumerate(self.recognizer.models):
+            if e.name in done:
+                if fresh is None or not any(r.model == e.name and r.ok for r in fresh.ranking):
+                    continue
+                poses = self._candidates(e.name, done[e.name], [fresh])
+            else:
+                poses = self._candidates(e.name)
+            if poses:
+                entries.append((i, e))
+                items.append((np.stack([p[0] for p in poses]), np.stack([p[1] for p in poses]), poses[0][2]))
+        weight = np.array([len(f.points) for f in self.features]) * use
+        fitted = self.recognizer.runner.map(fit_stage, [i for i, _ in entries], [f.curves for f in self.features],
+                                            weight, items=items)
+        self._fit_work += sum(queries for _, queries in fitted)
+        for (_, e), (_, _, scale), (poses, _) in zip(entries, items, fitted):
+            best = None
+            for R, t, per in poses:
+                err = float((per * weight).sum() / max(weight.sum(), 1))
+                if best is None or clearly_less(err, best.error):
+                    best = Hypothesis(e.name, R, t, scale, err, per,
+                                      tuple(bool(c) for c in self._consistent(e.name, per[None])[0]))
+            done[e.name] = best
+        return dict(done)
 
     def family(self, name: str) -> np.ndarray:
         """Model ``name``'s pose and the poses along the motions its touches leave free, ``(p, 3, 4)``
@@ -331,7 +337,7 @@ class Session:
                 t.append(dR @ (best.translation - q) + q + a * slide)
         if not R:
             return self._distinct(best, np.empty((0, 3, 3)), np.empty((0, 3)))
-        R, t, _ = _refine(model, np.array(R), np.array(t), x, FAMILY_ITERATIONS)
+        R, t, _, _ = refine(model, np.array(R), np.array(t), x, FAMILY_ITERATIONS)
         per = self._per_touch(model, R, t, best.scale)
         fits = self._consistent(best.model, per)[:, use].all(axis=1)
         return self._distinct(best, R[fits], t[fits])
@@ -352,10 +358,11 @@ class Session:
                 where.append(x)
         return np.array(kept)
 
-    def _joint_fit(self) -> SessionResult:
+    def _joint_fit(self, fresh=None) -> SessionResult:
+        """Steps 2-4 and 6, after the search ``fresh`` of step 5 (None: after the touch's own)."""
         n = len(self.features)
         every = np.ones(n, dtype=bool)
-        found = {e.name: h for e in self.recognizer.models if (h := self._fit_model(e, every)) is not None}
+        found = self._fit_models(every, fresh)
         # a touch has slipped when no pose that fits most touches fits it; without such a pose
         # the session cannot tell which touch is the odd one out
         majority = [h for h in found.values() if 2 * sum(h.consistent) > n]
@@ -363,7 +370,7 @@ class Session:
         keep = [i for i in range(n) if i not in slipped]
         if slipped:
             use = np.isin(np.arange(n), keep)
-            found = {e.name: h for e in self.recognizer.models if (h := self._fit_model(e, use)) is not None}
+            found = self._fit_models(use, fresh)
         self._joint = found
         by_name = {e.name: e for e in self.recognizer.models}
         ranked = sorted(found.values(), key=lambda h: (h.error, h.model))

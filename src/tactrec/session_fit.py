@@ -1,0 +1,66 @@
+"""Step 2 of a session (:mod:`tactrec.session`): one model's candidate poses scored on every touch,
+the best refined jointly.  A stage of the recognizer's runner (:class:`tactrec.recognition.Recognizer`),
+so the models of a session are fitted in its worker processes, each model's arithmetic the same in
+any process."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .linalg import transform
+
+__all__ = ["refine", "per_touch", "fit_stage", "JOINT_ITERATIONS", "REFINED"]
+
+#: Gauss-Newton steps of a joint refinement, and how many candidate poses per model are refined
+JOINT_ITERATIONS, REFINED = 15, 2
+
+
+def refine(model, R: np.ndarray, t: np.ndarray, x: np.ndarray, iterations: int):
+    """Poses ``R (h, 3, 3), t (h, 3)`` refined on points ``x (m, 3)`` (model units): ``R, t, error (h,),
+    queries`` (closest-point queries, or point evaluations on a closed-form surface)."""
+    if model.kind == "mesh":
+        from .registration import mesh_fast
+
+        return mesh_fast.refine(model, R, t, x, iterations=iterations)
+    from .registration import closedform_fast
+
+    return (*closedform_fast.refine(model, R, t, x, iterations=iterations), (iterations + 1) * len(R) * len(x))
+
+
+def per_touch(model, R: np.ndarray, t: np.ndarray, points: list, scale: float) -> np.ndarray:
+    """Mean distance of each touch's points ``points[i] (m_i, 3)`` (data units) under poses
+    ``R (h, 3, 3), t (h, 3)``: ``(h, N)``, data units."""
+    out = []
+    for x in points:
+        d = model.distance(transform(R, t, x * scale)) / scale
+        out.append(np.mean(d, axis=1))
+    return np.stack(out, axis=1)
+
+
+def fit_stage(held, indices, curves: list, weight: np.ndarray, items: list) -> list:
+    """Per model at ``indices``, its candidate poses ``items[k] = (R (h, 3, 3), t (h, 3), scale)``
+    scored on every touch (``curves[i]``: touch ``i``'s curves, data units), ranked by the mean
+    distances summed over the touches weighted by ``weight (N,)`` (points a touch, 0 for a touch
+    left out), the best :data:`REFINED` refined on every point of the touches weighted
+    (:data:`JOINT_ITERATIONS` steps).  Returns per model
+    ``(fitted, queries)``: ``fitted`` a list of ``(R (3, 3), t (3,), per (N,))``, a refined pose or
+    its start when refining did not lower the weighted sum."""
+    points = [np.concatenate(c) for c in curves]
+    used = [c for c, w in zip(curves, weight) if w > 0]
+    out = []
+    for index, (R, t, scale) in zip(indices, items):
+        model = held.entries[index].model
+        per = per_touch(model, R, t, points, scale)                                      # (h, N)
+        queries = len(R) * sum(len(p) for p in points)
+        x = np.concatenate([np.concatenate(c) for c in used]) * scale
+        total = (per * weight).sum(axis=1)                  # element-wise: no BLAS kernel in the ranking
+        fitted = []
+        for k in np.argsort(total, kind="stable")[:REFINED]:
+            Rk, tk, _, q = refine(model, R[k:k + 1], t[k:k + 1], x, JOINT_ITERATIONS)
+            per_k = per_touch(model, Rk, tk, points, scale)[0]
+            queries += q + sum(len(p) for p in points)
+            if not (per_k * weight).sum() <= total[k]:                        # keep the start if not better
+                Rk, tk, per_k = R[k:k + 1], t[k:k + 1], per[k]
+            fitted.append((Rk[0], tk[0], per_k))
+        out.append((fitted, queries))
+    return out
