@@ -241,12 +241,11 @@ def test_a_new_touch_whose_own_search_fitted_nothing_rules_no_model_out(small):
         "the touch leaves no model beyond its limit to rule out: the check above is vacuous"
 
 
-def test_a_sessions_fits_are_the_same_in_worker_processes_and_its_searches_share_one_budget():
-    """Two sessions of three hard touches (noise 0.05 mm, 12 mm curves 30 degrees apart, no
-    outward side) on scans searched under a small budget, so that some adds search again with the
-    other touches in the score (step 5), one of them from two touches: in this process and in two
-    worker processes the same hypotheses, errors and probabilities; and in every add a search with
-    context starts only while the budget the touch's own search was allowed is not yet spent."""
+def test_a_sessions_fits_are_the_same_in_worker_processes():
+    """Two sessions of three hard touches (noise 0.05 mm, 12 mm curves 30 degrees apart, no outward
+    side) on scans searched under a small budget, so that adds search again with the other touches
+    in the score (step 5) and fit the models again from those searches' poses: in this process and
+    in two worker processes, the same hypotheses, errors and probabilities."""
     from tactrec.database import build_entries
 
     hard = dict(points=41, spacing=0.3, angle=30.0, noise=0.05, noise_kind="gaussian", outward=False)
@@ -262,11 +261,9 @@ def test_a_sessions_fits_are_the_same_in_worker_processes_and_its_searches_share
                 for i in range(3):
                     touch = simulate_random_touch(entry.model, rng=instance_rng(32, k, j, i), **hard)
                     result = session.add(touch, sensor_to_world(touch, pose))
-                    work = [s.work for s in session.searches[1:]]
-                    assert sum(work[:-1]) < session.solo[-1].allowed
-                    searched.append(len(work))
+                    searched.append(len(session.searches) - 1)
                     out.append((result.best, result.slipped, result.probabilities,
                                 [(h.model, h.error, h.rotation.tobytes(), h.per_touch.tobytes()) for h in result.ranking]))
             runs[workers] = out
     assert runs[1] == runs[2]
-    assert max(searched) >= 2, "no add searched from two touches: the budget check above is vacuous"
+    assert max(searched) >= 1, "no add searched with the other touches in the score: a fit after one is not compared"

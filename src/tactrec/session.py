@@ -44,12 +44,8 @@ touch and a joint refinement (more searches only in step 5):
    needs no other.  When the new touch's own search fitted no model (its
    best error beyond ``fit_limit`` and three standard errors), its errors
    rule nothing out and every model whose pose does not fit every touch is
-   covered.  The joint stage of an add has one touch's budget: its joint
-   fits and these searches together spend at most the closest-point queries
-   the new touch's own search was allowed (a search's work counted on every
-   point it scores; a search starts only while some is left, and its first
-   round always runs), so an add costs at most about two searches of
-   one touch that run to their budget.  Each search stops once its best pose fits
+   covered.  Each search may try as many poses per model as the touch's own
+   search, each scored on every touch, and it stops once its best pose fits
    the touches as well as their own searches fit each (the points-weighted
    mean of each touch's best fit on any model, or of ``fit_limit``,
    whichever is larger): the joint form of the single search's rule, with
@@ -126,7 +122,6 @@ class Session:
         self.features: list = []
         self._joint: dict[str, Hypothesis] = {}
         self._fits: dict[bytes, dict[str, Hypothesis]] = {}   # this add's fits, per set of touches used
-        self._fit_work = 0                      # this add's closest-point queries in joint fits
         self.result: SessionResult | None = None
 
     def add(self, data: TactileData, sensor2world=None) -> SessionResult:
@@ -149,7 +144,7 @@ class Session:
         self.solo.append(rec)
         self.searches = [rec]
         self.features.append(rec.touch)
-        self._fits, self._fit_work = {}, 0
+        self._fits = {}
         self.result = self._joint_fit()
         if self.joint_search and earlier and self.recognizer.method.scores_context:
             self._search_jointly(slipped)
@@ -160,15 +155,12 @@ class Session:
         """Step 5: while no pose found fits every touch kept, search again from one of them, scoring
         poses on all: the new touch, then the one kept before it (:data:`STARTS`).  Each search covers
         the models the new touch fits on its own whose pose does not fit them all, and stops once a
-        pose fits the touches as well as their own searches fit each; with the add's joint fits they
-        spend at most the work the new touch's own search was allowed (closest-point queries)."""
+        pose fits the touches as well as their own searches fit each."""
         use = [i for i in range(len(self.features)) if i not in slipped]
         sizes = np.array([len(self.features[i].points) for i in use])
         fit = float((sizes * self._own_fits()[use]).sum() / sizes.sum())      # element-wise: no BLAS kernel
-        own = self.solo[-1]
-        left = (own.work if own.allowed is None else own.allowed) - self._fit_work
         for start in use[::-1][:STARTS]:
-            if self._explained(slipped) or left <= 0:
+            if self._explained(slipped):
                 return
             among = self._unexplained(slipped)
             if not among:
@@ -176,12 +168,9 @@ class Session:
             # a search that stopped at a pose the other touches rule out may reach the truth from
             # another touch, whose places rank by other curvatures
             context = [c for i in use if i != start for c in self.world[i].curves]
-            found = self.recognizer.recognize(self.world[start], context=context, among=among, fit=fit,
-                                              budget=left)
+            found = self.recognizer.recognize(self.world[start], context=context, among=among, fit=fit)
             self.searches.append(found)
-            done = self._fit_work
             self.result = self._joint_fit(found)
-            left -= found.work + self._fit_work - done
 
     def _explained(self, slipped: set) -> bool:
         """Whether the best model's joint pose is consistent with every touch but those ``slipped``
@@ -285,8 +274,7 @@ class Session:
         weight = np.array([len(f.points) for f in self.features]) * use
         fitted = self.recognizer.runner.map(fit_stage, [i for i, _ in entries], [f.curves for f in self.features],
                                             weight, items=items)
-        self._fit_work += sum(queries for _, queries in fitted)
-        for (_, e), (_, _, scale), (poses, _) in zip(entries, items, fitted):
+        for (_, e), (_, _, scale), poses in zip(entries, items, fitted):
             best = None
             for R, t, per in poses:
                 err = float((per * weight).sum() / max(weight.sum(), 1))
@@ -337,7 +325,7 @@ class Session:
                 t.append(dR @ (best.translation - q) + q + a * slide)
         if not R:
             return self._distinct(best, np.empty((0, 3, 3)), np.empty((0, 3)))
-        R, t, _, _ = refine(model, np.array(R), np.array(t), x, FAMILY_ITERATIONS)
+        R, t, _ = refine(model, np.array(R), np.array(t), x, FAMILY_ITERATIONS)
         per = self._per_touch(model, R, t, best.scale)
         fits = self._consistent(best.model, per)[:, use].all(axis=1)
         return self._distinct(best, R[fits], t[fits])

@@ -16,15 +16,15 @@ JOINT_ITERATIONS, REFINED = 15, 2
 
 
 def refine(model, R: np.ndarray, t: np.ndarray, x: np.ndarray, iterations: int):
-    """Poses ``R (h, 3, 3), t (h, 3)`` refined on points ``x (m, 3)`` (model units): ``R, t, error (h,),
-    queries`` (closest-point queries, or point evaluations on a closed-form surface)."""
+    """Poses ``R (h, 3, 3), t (h, 3)`` refined on points ``x (m, 3)`` (model units): ``R, t, error (h,)``."""
     if model.kind == "mesh":
         from .registration import mesh_fast
 
-        return mesh_fast.refine(model, R, t, x, iterations=iterations)
+        R, t, error, _ = mesh_fast.refine(model, R, t, x, iterations=iterations)
+        return R, t, error
     from .registration import closedform_fast
 
-    return (*closedform_fast.refine(model, R, t, x, iterations=iterations), (iterations + 1) * len(R) * len(x))
+    return closedform_fast.refine(model, R, t, x, iterations=iterations)
 
 
 def per_touch(model, R: np.ndarray, t: np.ndarray, points: list, scale: float) -> np.ndarray:
@@ -42,25 +42,22 @@ def fit_stage(held, indices, curves: list, weight: np.ndarray, items: list) -> l
     scored on every touch (``curves[i]``: touch ``i``'s curves, data units), ranked by the mean
     distances summed over the touches weighted by ``weight (N,)`` (points a touch, 0 for a touch
     left out), the best :data:`REFINED` refined on every point of the touches weighted
-    (:data:`JOINT_ITERATIONS` steps).  Returns per model
-    ``(fitted, queries)``: ``fitted`` a list of ``(R (3, 3), t (3,), per (N,))``, a refined pose or
-    its start when refining did not lower the weighted sum."""
+    (:data:`JOINT_ITERATIONS` steps).  Returns per model a list of ``(R (3, 3), t (3,), per (N,))``,
+    a refined pose or its start when refining did not lower the weighted sum."""
     points = [np.concatenate(c) for c in curves]
     used = [c for c, w in zip(curves, weight) if w > 0]
     out = []
     for index, (R, t, scale) in zip(indices, items):
         model = held.entries[index].model
         per = per_touch(model, R, t, points, scale)                                      # (h, N)
-        queries = len(R) * sum(len(p) for p in points)
         x = np.concatenate([np.concatenate(c) for c in used]) * scale
         total = (per * weight).sum(axis=1)                  # element-wise: no BLAS kernel in the ranking
         fitted = []
         for k in np.argsort(total, kind="stable")[:REFINED]:
-            Rk, tk, _, q = refine(model, R[k:k + 1], t[k:k + 1], x, JOINT_ITERATIONS)
+            Rk, tk, _ = refine(model, R[k:k + 1], t[k:k + 1], x, JOINT_ITERATIONS)
             per_k = per_touch(model, Rk, tk, points, scale)[0]
-            queries += q + sum(len(p) for p in points)
             if not (per_k * weight).sum() <= total[k]:                        # keep the start if not better
                 Rk, tk, per_k = R[k:k + 1], t[k:k + 1], per[k]
             fitted.append((Rk[0], tk[0], per_k))
-        out.append((fitted, queries))
+        out.append(fitted)
     return out
