@@ -272,7 +272,7 @@ class Session:
                 entries.append((i, e))
                 items.append((np.stack([p[0] for p in poses]), np.stack([p[1] for p in poses]), poses[0][2]))
         weight = np.array([len(f.points) for f in self.features]) * use
-        fitted = self.recognizer.runner.map(fit_stage, [i for i, _ in entries], [f.curves for f in self.features],
+        fitted = self.recognizer.runner.map(fit_stage, [i for i, _ in entries], [f.points for f in self.features],
                                             weight, items=items)
         for (_, e), (_, _, scale), poses in zip(entries, items, fitted):
             best = None

@@ -37,20 +37,19 @@ def per_touch(model, R: np.ndarray, t: np.ndarray, points: list, scale: float) -
     return np.stack(out, axis=1)
 
 
-def fit_stage(held, indices, curves: list, weight: np.ndarray, items: list) -> list:
+def fit_stage(held, indices, points: list, weight: np.ndarray, items: list) -> list:
     """Per model at ``indices``, its candidate poses ``items[k] = (R (h, 3, 3), t (h, 3), scale)``
-    scored on every touch (``curves[i]``: touch ``i``'s curves, data units), ranked by the mean
-    distances summed over the touches weighted by ``weight (N,)`` (points a touch, 0 for a touch
-    left out), the best :data:`REFINED` refined on every point of the touches weighted
+    scored on every touch (``points[i] (m_i, 3)``: touch ``i``'s points, data units), ranked by the
+    mean distances summed over the touches weighted by ``weight (N,)`` (points a touch, 0 for a
+    touch left out), the best :data:`REFINED` refined on every point of the touches weighted
     (:data:`JOINT_ITERATIONS` steps).  Returns per model a list of ``(R (3, 3), t (3,), per (N,))``,
     a refined pose or its start when refining did not lower the weighted sum."""
-    points = [np.concatenate(c) for c in curves]
-    used = [c for c, w in zip(curves, weight) if w > 0]
+    used = np.concatenate([p for p, w in zip(points, weight) if w > 0])
     out = []
     for index, (R, t, scale) in zip(indices, items):
         model = held.entries[index].model
         per = per_touch(model, R, t, points, scale)                                      # (h, N)
-        x = np.concatenate([np.concatenate(c) for c in used]) * scale
+        x = used * scale
         total = (per * weight).sum(axis=1)                  # element-wise: no BLAS kernel in the ranking
         fitted = []
         for k in np.argsort(total, kind="stable")[:REFINED]:
