@@ -157,11 +157,13 @@ def default_workers() -> int:
 
 
 class _Held:
-    """The models a process holds, and a cache the stages may keep per touch."""
+    """The models a process holds, a cache the stages may keep per touch, and what they build once
+    per model (``samples``)."""
 
     def __init__(self, entries: Sequence[ModelEntry]):
         self.entries = list(entries)
         self.cache: dict = {}
+        self.samples: dict = {}
 
 
 class _Serial:

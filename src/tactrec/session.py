@@ -67,6 +67,7 @@ from .io.session import SessionTouch, rigid_pose
 from .io.touch import TactileData
 from .linalg import clearly_less
 from .probability import evidence, fit_limit, fit_standard_error, planes, residuals
+from . import session_pairs
 from .session_fit import fit_stage, per_touch, refine
 from .session_result import Hypothesis, SessionResult
 
@@ -146,8 +147,13 @@ class Session:
         self.features.append(rec.touch)
         self._fits = {}
         self.result = self._joint_fit()
-        if self.joint_search and earlier and self.recognizer.method.scores_context:
-            self._search_jointly(slipped)
+        if self.joint_search and earlier:
+            found = session_pairs.search(self, [i for i in range(len(self.features)) if i not in slipped])
+            if found is not None:
+                self.searches.append(found)
+                self.result = self._joint_fit(found)
+            if self.recognizer.method.scores_context:
+                self._search_jointly(slipped)
         self.result = dataclasses.replace(self.result, seconds=time.perf_counter() - start)
         return self.result
 

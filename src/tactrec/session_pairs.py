@@ -1,0 +1,234 @@
+"""Step 5 of a session (:mod:`tactrec.session`): poses from a pair of touches, over every place.
+
+A touch's own search ranks a model's places by how well their curvatures
+match the touch's; on a short noisy touch the curvatures say little and the
+true place can rank in the thousands, beyond any budget.  Two touches of one
+still object in one frame need no curvature: their contacts ``c_i, c_j`` and
+normals ``n_i, n_j`` fix the pose.  Put touch ``i``'s contact on a model
+place ``a`` with its normal onto the place's normal: one turn ``theta`` about
+that normal is left, and under it touch ``j``'s contact runs round a circle
+about ``a`` (height ``(c_j - c_i) . n_i`` above the tangent plane, radius the
+rest of ``|c_j - c_i|``).  A pose is a *candidate* where that circle passes
+within the model's vertex spacing of a vertex whose normal agrees with
+``n_j`` turned the same way (either sign: a touch without an outward side
+has none), within :func:`tolerance`.  Every vertex is a place ``a``, both
+signs of ``n_i`` are tried, and ``theta`` is stepped so that the circle
+moves half a vertex spacing a step: nothing here ranks by curvature, so the
+pair search covers the model whatever the touches' noise.
+
+The candidates are then scored as a touch's own search scores its poses
+(:mod:`tactrec.methods.fast`): one Gauss-Newton step on a few points of
+every curve of every touch, the best eighth (at least ``screen``) two more,
+the best ``refine`` refined on three times the points and the best of them on
+all points.  The model's best pose and the others refined are returned as a
+:class:`~tactrec.registration.result.Registration` with ``alternatives``,
+as a search would, and the session's joint fit (step 2) takes them up.
+
+Closed-form surfaces are sampled at :data:`SAMPLES` seeded sites, a mesh at
+its vertices.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from .features import subset
+from .linalg import compose, rotate, stable_order, transform
+from .registration.result import Registration
+from .session_fit import refine
+from .surfaces.mesh_curvature import tangents
+
+__all__ = ["PairSearch", "pair_stage", "tolerance", "SAMPLES", "CHUNK"]
+
+#: oriented points sampled on a closed-form surface (a mesh uses its vertices)
+SAMPLES = 6000
+#: (place, turn) pairs handled at once
+CHUNK = 200_000
+
+
+@dataclasses.dataclass(frozen=True)
+class PairSearch:
+    """The outcome of a pair search: per model its best pose and the others refined (``ranking``,
+    as a :class:`~tactrec.recognition.Recognition` has), and the closest-point queries spent."""
+
+    ranking: list
+    work: int
+    pair: tuple
+
+
+def turns(normals: np.ndarray, pairs: np.ndarray) -> np.ndarray:
+    """Per sample ``(n,)``, radians: the largest angle between its normal ``normals (n, 3)`` and its
+    neighbours' (``pairs (p, 2)`` of sample indices): how far the model's normal field turns from
+    one sample to the next, which bounds how far a touch's normal between samples is from theirs."""
+    angle = np.arccos(np.clip(np.abs(np.sum(normals[pairs[:, 0]] * normals[pairs[:, 1]], axis=1)), 0.0, 1.0))
+    out = np.zeros(len(normals))
+    np.maximum.at(out, pairs[:, 0], angle)
+    np.maximum.at(out, pairs[:, 1], angle)
+    return out
+
+
+def _oriented_points(model):
+    """A model's oriented samples: points ``(n, 3)``, unit normals ``(n, 3)``, their :func:`turns`
+    ``(n,)``, their spacing (model units) and a k-d tree of the points."""
+    from scipy.spatial import cKDTree
+
+    if model.kind == "mesh":
+        points, normals = model.vertices, model.fine_curvatures.normal
+        tree = cKDTree(points)
+        edges = model.faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)          # neighbours along the surface
+        return points, normals, turns(normals, edges), float(np.median(model.edge_lengths)), tree
+    frames = [model.site_frame(s) for s in model.random_sites(SAMPLES, rng=np.random.default_rng(0))]
+    points, normals = np.array([f.point for f in frames]), np.array([f.normal for f in frames])
+    tree = cKDTree(points)
+    spacing = 1.5 * float(np.median(tree.query(points, k=2)[0][:, 1]))
+    return points, normals, turns(normals, tree.query_pairs(spacing, output_type="ndarray")), spacing, tree
+
+
+def _candidates(points, normals, turn, error, spacing, tree, ci, ni, cj, nj, reach):
+    """Poses ``R (h, 3, 3), t (h, 3)`` (model = R data + t) that put contact ``ci`` on a sample
+    with normal ``ni`` onto its normal and contact ``cj`` within ``spacing`` of a sample whose
+    normal agrees with ``nj`` (either sign) within ``angle`` (per sample, radians); see the module
+    text.  The turn is stepped so that ``cj``, or a point ``reach`` from ``ci`` when that is
+    farther, moves at most ``spacing`` a step."""
+    e1, e2 = (v[0] for v in tangents(ni[None]))
+    Fi = np.stack([e1, e2, ni], axis=1)                                     # touch frame, columns
+    v = (cj - ci) @ Fi                                                      # (x, y, z) in it
+    rho, psi = float(np.hypot(v[0], v[1])), float(np.arctan2(v[1], v[0]))
+    steps = max(12, int(np.ceil(4 * np.pi * max(rho, reach) / spacing)))
+    theta = 2 * np.pi * np.arange(steps) / steps
+    t1, t2 = tangents(normals)
+    nj_local = nj @ Fi                                                      # (3,)
+    cos, sin = np.cos(theta + psi), np.sin(theta + psi)
+    found = []
+    per = max(1, CHUNK // steps)
+    for lo in range(0, len(points), per):
+        a = np.arange(lo, min(lo + per, len(points)))
+        p = points[a, None] + v[2] * normals[a, None] \
+            + rho * (cos[None, :, None] * t1[a, None] + sin[None, :, None] * t2[a, None])   # (k, s, 3)
+        # a tilt of touch i's normal within the place's tolerance moves touch j's contact this far
+        tilt = np.minimum(error + turn[a], np.pi / 2)
+        near = spacing + np.hypot(rho, v[2]) * np.sin(tilt)
+        d, b = tree.query(p.reshape(-1, 3), distance_upper_bound=float(near.max()))
+        which = np.nonzero(d <= np.repeat(near, steps))[0]
+        ka, ks, kb = a[which // steps], which % steps, b[which]
+        # touch j's normal, turned by theta about touch i's normal, in the place's frame
+        c, s = np.cos(theta[ks]), np.sin(theta[ks])
+        local = np.stack([c * nj_local[0] - s * nj_local[1], s * nj_local[0] + c * nj_local[1],
+                          np.full(len(ks), nj_local[2])], axis=1)
+        turned = local[:, :1] * t1[ka] + local[:, 1:2] * t2[ka] + local[:, 2:] * normals[ka]
+        agree = np.abs(np.sum(turned * normals[kb], axis=1)) >= np.cos(np.minimum(error + turn[ka] + turn[kb], np.pi))
+        found.append((ka[agree], ks[agree]))
+    ka, ks = (np.concatenate([f[k] for f in found]) for k in range(2))
+    if not len(ka):
+        return np.empty((0, 3, 3)), np.empty((0, 3))
+    c, s = np.cos(theta[ks]), np.sin(theta[ks])
+    Rz = np.zeros((len(ks), 3, 3))
+    Rz[:, 0, 0], Rz[:, 0, 1], Rz[:, 1, 0], Rz[:, 1, 1], Rz[:, 2, 2] = c, -s, s, c, 1.0
+    Fa = np.stack([t1[ka], t2[ka], normals[ka]], axis=2)                   # (h, 3, 3) columns
+    R = compose(compose(Fa, Rz), Fi.T[None])
+    return R, points[ka] - rotate(R, ci)
+
+
+def pair_stage(held, indices, touches: list, pair: tuple, normal_error: float, options: dict) -> list:
+    """Per model at ``indices``: the pair search (module text) from touches ``pair = (i, j)`` of
+    ``touches`` (per touch ``(curves, contact (3,), normal (3,))``, data units), poses scored on
+    every touch's curves.  ``options``: the scoring's ``coarse_points``, ``screen``, ``refine``,
+    ``iterations`` and ``scale`` (per index, data to model units).  Returns per model ``(R (k, 3, 3),
+    t (k, 3), error (k,), queries)``, best first (error in data units), or None when no pose
+    qualified."""
+    out = []
+    for index in indices:
+        model = held.entries[index].model
+        scale = options["scale"][index]
+        key = ("pairs", index)
+        if key not in held.samples:
+            held.samples[key] = _oriented_points(model)
+        points, normals, turn, spacing, tree = held.samples[key]
+        (first, ci, ni), (_, cj, nj) = touches[pair[0]], touches[pair[1]]
+        reach = scale * max(float(np.max(np.linalg.norm(c - ci, axis=1))) for c in first)
+        R, t = [], []
+        for sign in (1.0, -1.0):
+            Rs, ts = _candidates(points, normals, turn, normal_error, spacing, tree, ci * scale, sign * ni, cj * scale, nj, reach)
+            R.append(Rs)
+            t.append(ts)
+        R, t = np.concatenate(R), np.concatenate(t)
+        if not len(R):
+            out.append(None)
+            continue
+        curves = [c * scale for curves, _, _ in touches for c in curves]
+        x = np.concatenate(curves)
+        out.append(_scored(model, R, t, curves, x, options, scale))
+    return out
+
+
+def _scored(model, R, t, curves, x, options, scale):
+    """The candidates ``R, t`` scored and refined (module text): ``R, t, error`` (data units) best
+    first, and the closest-point queries spent."""
+    ends = subset(curves, 2)
+    screen = np.concatenate([model.distance(transform(R[lo:lo + CHUNK // len(ends)], t[lo:lo + CHUNK // len(ends)],
+                                                      ends).reshape(-1, 3)).reshape(-1, len(ends)).mean(axis=1)
+                             for lo in range(0, len(R), CHUNK // len(ends))])
+    keep = stable_order(screen)[:max(options["screen"], len(R) // 8)]
+    queries = len(R) * len(ends)
+    coarse = subset(curves, options["coarse_points"])
+    if model.kind == "mesh":
+        from .registration import mesh_fast
+
+        R, t, score, q = mesh_fast.refine(model, R[keep], t[keep], coarse, iterations=2, predict=True)
+        queries += q
+    else:
+        R, t, score = refine(model, R[keep], t[keep], coarse, 2)
+        queries += 3 * len(keep) * len(coarse)
+    keep = stable_order(score)[:options["refine"]]
+    fine = subset(curves, 3 * options["coarse_points"])
+    R, t, error = refine(model, R[keep], t[keep], fine, options["iterations"])
+    queries += (options["iterations"] + 1) * len(keep) * len(fine)
+    order = stable_order(error)
+    R, t, error = R[order], t[order], error[order]
+    Rb, tb, eb = refine(model, R[:1], t[:1], x, 2)
+    if eb[0] < error[0]:
+        R, t, error = np.concatenate([Rb, R[1:]]), np.concatenate([tb, t[1:]]), np.concatenate([eb, error[1:]])
+    return R, t, error / scale, queries + 3 * len(x)
+
+
+#: a touch's fitted normal is taken to be within this angle (radians) of the model's normal at its
+#: contact, besides how far the surface turns within a vertex spacing (:func:`tolerance`)
+NORMAL_ERROR = np.deg2rad(5.0)
+
+
+def search(session, keep: list) -> PairSearch | None:
+    """The pair search (module text) for a :class:`~tactrec.session.Session`: the newest of the
+    touches ``keep`` (indices, oldest first) paired with the one of them farthest from it (the
+    turn is best pinned by a long pair), on every model, poses scored on the touches ``keep``, in
+    the recognizer's worker processes.  None with fewer than two touches."""
+    from .methods.common import in_model_units
+    from .registration.mesh_fast import data_curvatures
+
+    if len(keep) < 2:
+        return None
+    touches = []
+    for i in keep:
+        f = session.features[i]
+        normal = data_curvatures(f.geometry, f.points, f.radius)[2]
+        touches.append((f.curves, f.geometry.contact, normal))
+    far = int(np.argmax([np.linalg.norm(c - touches[-1][1]) for _, c, _ in touches[:-1]]))
+    config, models = session.recognizer.config, session.recognizer.models
+    options = {name: getattr(config, name, default) for name, default in
+               (("coarse_points", 5), ("screen", 96), ("refine", 8), ("iterations", 20))}
+    options["scale"] = {i: in_model_units(session.features[keep[-1]], e.model).scale for i, e in enumerate(models)}
+    found = session.recognizer.runner.map(pair_stage, list(range(len(models))), touches, (len(keep) - 1, far),
+                                          NORMAL_ERROR, options)
+    ranking, work = [], 0
+    for i, (e, poses) in enumerate(zip(models, found)):
+        if poses is None:
+            ranking.append(Registration.rejection(e.name, "no pose puts both contacts on the surface"))
+            continue
+        R, t, error, queries = poses
+        s = options["scale"][i]
+        ranking.append(Registration(model=e.name, error=float(error[0] * s), rotation=R[0], translation=t[0],
+                                    scale=s, candidates=len(R),
+                                    alternatives=np.concatenate([R[1:], t[1:, :, None]], axis=2)))
+        work += queries
+    return PairSearch(ranking, int(work), (keep[-1], keep[far]))
