@@ -4,28 +4,32 @@ A touch's own search ranks a model's places by how well their curvatures
 match the touch's; on a short noisy touch the curvatures say little and the
 true place can rank in the thousands, beyond any budget.  Two touches of one
 still object in one frame need no curvature: their contacts ``c_i, c_j`` and
-normals ``n_i, n_j`` fix the pose.  Put touch ``i``'s contact on a model
-place ``a`` with its normal onto the place's normal: one turn ``theta`` about
-that normal is left, and under it touch ``j``'s contact runs round a circle
-about ``a`` (height ``(c_j - c_i) . n_i`` above the tangent plane, radius the
-rest of ``|c_j - c_i|``).  A pose is a *candidate* where that circle passes
-within the model's vertex spacing of a vertex whose normal agrees with
-``n_j`` turned the same way (either sign: a touch without an outward side
-has none), within :func:`tolerance`.  Every vertex is a place ``a``, both
-signs of ``n_i`` are tried, and ``theta`` is stepped so that the circle
-moves half a vertex spacing a step: nothing here ranks by curvature, so the
-pair search covers the model whatever the touches' noise.
+normals ``n_i, n_j`` fix the pose.
+
+The model is sampled evenly over its surface (a mesh: as many samples as it
+has vertices, with the vertex normals interpolated; a closed-form surface:
+:data:`SAMPLES` seeded sites).  Each sample's *turn* is the largest angle
+between its normal and its neighbours' (either sign: a thin wall's two sides
+are not neighbours): it bounds how far the normal of a point between samples
+is from theirs.  Put touch ``i``'s contact on a place ``a`` (one sample per
+cell :data:`PLACE_CELL` spacings across) with its normal onto the place's
+normal: one turn ``theta`` about that normal is left, and under it touch
+``j``'s contact runs round a circle about ``a``.  ``theta`` is stepped so that
+the contact (or a point of touch ``i`` at its reach) moves one spacing a
+step.  A pose is a *candidate* where the circle passes near a sample (one
+spacing, plus how far a tilt of ``n_i`` within the place's tolerance moves
+``c_j``) whose normal agrees with ``n_j`` turned the same way (either sign)
+within :data:`NORMAL_ERROR` plus the two samples' turns.  Both signs of
+``n_i`` are tried.
 
 The candidates are then scored as a touch's own search scores its poses
-(:mod:`tactrec.methods.fast`): one Gauss-Newton step on a few points of
-every curve of every touch, the best eighth (at least ``screen``) two more,
-the best ``refine`` refined on three times the points and the best of them on
-all points.  The model's best pose and the others refined are returned as a
-:class:`~tactrec.registration.result.Registration` with ``alternatives``,
-as a search would, and the session's joint fit (step 2) takes them up.
-
-Closed-form surfaces are sampled at :data:`SAMPLES` seeded sites, a mesh at
-its vertices.
+(:mod:`tactrec.methods.fast`): the curves' ends against the samples' tangent
+planes, the best eighth (at least ``screen``) two Gauss-Newton steps on a few
+points of every curve, the best ``refine`` refined on three times the
+points and the best of them on all points.  The model's best pose and the
+others refined are returned as a
+:class:`~tactrec.registration.result.Registration` with ``alternatives``, as
+a search would, and the session's joint fit (step 2) takes them up.
 """
 
 from __future__ import annotations
@@ -40,12 +44,14 @@ from .registration.result import Registration
 from .session_fit import refine
 from .surfaces.mesh_curvature import tangents
 
-__all__ = ["PairSearch", "pair_stage", "tolerance", "SAMPLES", "CHUNK"]
+__all__ = ["PairSearch", "pair_stage", "search", "turns", "SAMPLES", "CHUNK", "PLACE_CELL", "NORMAL_ERROR"]
 
 #: oriented points sampled on a closed-form surface (a mesh uses its vertices)
 SAMPLES = 6000
 #: (place, turn) pairs handled at once
 CHUNK = 200_000
+#: places for touch i: one sample per cubic cell this many sample spacings across
+PLACE_CELL = 2.0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -75,12 +81,16 @@ def _oriented_points(model):
     from scipy.spatial import cKDTree
 
     if model.kind == "mesh":
-        points, normals = model.vertices, model.fine_curvatures.normal
-        tree = cKDTree(points)
-        edges = model.faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)          # neighbours along the surface
-        return points, normals, turns(normals, edges), float(np.median(model.edge_lengths)), tree
-    frames = [model.site_frame(s) for s in model.random_sites(SAMPLES, rng=np.random.default_rng(0))]
-    points, normals = np.array([f.point for f in frames]), np.array([f.normal for f in frames])
+        import trimesh
+
+        points, face = trimesh.sample.sample_surface_even(model._trimesh, len(model.vertices), seed=0)
+        corners = model.vertices[model.faces[face]]
+        weights = trimesh.triangles.points_to_barycentric(corners, points)
+        normals = np.einsum("nk,nkj->nj", weights, model.vertex_normals[model.faces[face]])
+        normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    else:
+        frames = [model.site_frame(s) for s in model.random_sites(SAMPLES, rng=np.random.default_rng(0))]
+        points, normals = np.array([f.point for f in frames]), np.array([f.normal for f in frames])
     tree = cKDTree(points)
     spacing = 1.5 * float(np.median(tree.query(points, k=2)[0][:, 1]))
     return points, normals, turns(normals, tree.query_pairs(spacing, output_type="ndarray")), spacing, tree
@@ -89,22 +99,24 @@ def _oriented_points(model):
 def _candidates(points, normals, turn, error, spacing, tree, ci, ni, cj, nj, reach):
     """Poses ``R (h, 3, 3), t (h, 3)`` (model = R data + t) that put contact ``ci`` on a sample
     with normal ``ni`` onto its normal and contact ``cj`` within ``spacing`` of a sample whose
-    normal agrees with ``nj`` (either sign) within ``angle`` (per sample, radians); see the module
-    text.  The turn is stepped so that ``cj``, or a point ``reach`` from ``ci`` when that is
+    normal agrees with ``nj`` (either sign) within ``error`` and the two samples' ``turn``; see
+    the module text.  The turn is stepped so that ``cj``, or a point ``reach`` from ``ci`` when that is
     farther, moves at most ``spacing`` a step."""
     e1, e2 = (v[0] for v in tangents(ni[None]))
     Fi = np.stack([e1, e2, ni], axis=1)                                     # touch frame, columns
     v = (cj - ci) @ Fi                                                      # (x, y, z) in it
     rho, psi = float(np.hypot(v[0], v[1])), float(np.arctan2(v[1], v[0]))
-    steps = max(12, int(np.ceil(4 * np.pi * max(rho, reach) / spacing)))
+    steps = max(12, int(np.ceil(2 * np.pi * max(rho, reach) / spacing)))
     theta = 2 * np.pi * np.arange(steps) / steps
     t1, t2 = tangents(normals)
     nj_local = nj @ Fi                                                      # (3,)
     cos, sin = np.cos(theta + psi), np.sin(theta + psi)
     found = []
     per = max(1, CHUNK // steps)
-    for lo in range(0, len(points), per):
-        a = np.arange(lo, min(lo + per, len(points)))
+    cell = np.floor((points - points.min(axis=0)) / (PLACE_CELL * spacing)).astype(np.int64)
+    places = np.sort(np.unique(cell, axis=0, return_index=True)[1])
+    for lo in range(0, len(places), per):
+        a = places[lo:lo + per]
         p = points[a, None] + v[2] * normals[a, None] \
             + rho * (cos[None, :, None] * t1[a, None] + sin[None, :, None] * t2[a, None])   # (k, s, 3)
         # a tilt of touch i's normal within the place's tolerance moves touch j's contact this far
@@ -159,7 +171,7 @@ def pair_stage(held, indices, touches: list, pair: tuple, normal_error: float, o
             continue
         curves = [c * scale for curves, _, _ in touches for c in curves]
         x = np.concatenate(curves)
-        out.append(_scored(model, R, t, curves, x, options, scale))
+        out.append(_scored(model, R, t, curves, x, dict(options, _samples=held.samples[key]), scale))
     return out
 
 
@@ -167,9 +179,15 @@ def _scored(model, R, t, curves, x, options, scale):
     """The candidates ``R, t`` scored and refined (module text): ``R, t, error`` (data units) best
     first, and the closest-point queries spent."""
     ends = subset(curves, 2)
-    screen = np.concatenate([model.distance(transform(R[lo:lo + CHUNK // len(ends)], t[lo:lo + CHUNK // len(ends)],
-                                                      ends).reshape(-1, 3)).reshape(-1, len(ends)).mean(axis=1)
-                             for lo in range(0, len(R), CHUNK // len(ends))])
+    points, normals, _, _, tree = options["_samples"]
+
+    def plane(x):                           # distance to the nearest sample's tangent plane
+        _, b = tree.query(x)
+        return np.abs(np.sum((x - points[b]) * normals[b], axis=1))
+
+    per = CHUNK // len(ends)
+    screen = np.concatenate([plane(transform(R[lo:lo + per], t[lo:lo + per], ends).reshape(-1, 3))
+                             .reshape(-1, len(ends)).mean(axis=1) for lo in range(0, len(R), per)])
     keep = stable_order(screen)[:max(options["screen"], len(R) // 8)]
     queries = len(R) * len(ends)
     coarse = subset(curves, options["coarse_points"])
@@ -194,7 +212,7 @@ def _scored(model, R, t, curves, x, options, scale):
 
 
 #: a touch's fitted normal is taken to be within this angle (radians) of the model's normal at its
-#: contact, besides how far the surface turns within a vertex spacing (:func:`tolerance`)
+#: contact, besides how far the surface turns between samples (:func:`turns`)
 NORMAL_ERROR = np.deg2rad(5.0)
 
 
