@@ -148,10 +148,11 @@ class Session:
         self._fits = {}
         self.result = self._joint_fit()
         if self.joint_search and earlier:
-            found = session_pairs.search(self, [i for i in range(len(self.features)) if i not in slipped])
-            if found is not None:
-                self.searches.append(found)
-                self.result = self._joint_fit(found)
+            if not self._fitted():
+                found = session_pairs.search(self, [i for i in range(len(self.features)) if i not in slipped])
+                if found is not None:
+                    self.searches.append(found)
+                    self.result = self._joint_fit(found)
             if self.recognizer.method.scores_context:
                 self._search_jointly(slipped)
         self.result = dataclasses.replace(self.result, seconds=time.perf_counter() - start)
@@ -177,6 +178,17 @@ class Session:
             found = self.recognizer.recognize(self.world[start], context=context, among=among, fit=fit)
             self.searches.append(found)
             self.result = self._joint_fit(found)
+
+    def _fitted(self) -> bool:
+        """Whether the best model's joint pose fits the touches kept as well as their noise allows
+        (its mean distance within three standard errors of the points-weighted mean of their
+        :func:`fit_limit`): then no search can fit them better."""
+        if not self.result.ranking:
+            return False
+        use = [i for i in range(len(self.features)) if i not in self.result.slipped]
+        sizes = np.array([len(self.features[i].points) for i in use])
+        limits = np.array([fit_limit(self.features[i], self._floor) for i in use])
+        return self.result.ranking[0].error <= _allowed(float((sizes * limits).sum() / sizes.sum()), int(sizes.sum()))
 
     def _explained(self, slipped: set) -> bool:
         """Whether the best model's joint pose is consistent with every touch but those ``slipped``
