@@ -41,7 +41,7 @@ def test_turns_are_the_largest_angle_to_a_neighbour_either_sign():
 
 def test_the_pair_search_finds_the_touched_model_and_its_pose():
     """Twenty seeded pairs of hard touches, the second within 40 mm of the first, on four scans in
-    random world frames: on at least 17 the touched scan fits best, and on at least 14 its pose
+    random world frames: on at least 18 the touched scan fits best, and on at least 13 its pose
     fits both touches to within 10% of the true pose's mean distance (the noise)."""
     from tactrec.database import build_entries
 
@@ -64,4 +64,4 @@ def test_the_pair_search_finds_the_touched_model_and_its_pose():
         truth = per_touch(model, R.T[None], (-R.T @ t)[None], [one.points, two.points], 1.0)[0].mean()
         first += int(np.argmin(errors) == m)
         posed += int(errors[m] <= 1.1 * truth)
-    assert first >= 17 and posed >= 14, (first, posed)
+    assert first >= 18 and posed >= 13, (first, posed)

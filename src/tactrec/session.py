@@ -23,7 +23,13 @@ touch and a joint refinement (more searches only in step 5):
 4. a touch that no pose fitting most touches fits is reported as *slipped*
    (the contact moved, or the object did) and left out of every fit and
    probability, never averaged in;
-5. when the best model's pose is not consistent with every touch not set
+5. when the best model's joint pose is not a fit under the touches' noise
+   (its mean distance beyond three standard errors of the points-weighted
+   mean of their :func:`~tactrec.probability.fit_limit`), the *pair search*
+   (:mod:`tactrec.session_pairs`) poses every model from the new touch and
+   the kept touch farthest from it, over every place of the model and with
+   no curvature ranking, and steps 2-4 run again on its poses; then, when
+   the best model's pose is not consistent with every touch not set
    aside before this one (the new touch and any step 4 now calls slipped
    included: a pose the earlier searches missed can make a good touch look
    slipped), the new touch is searched again with the earlier touches'
