@@ -46,7 +46,7 @@ from .surfaces.mesh_curvature import tangents
 
 __all__ = ["PairSearch", "pair_stage", "search", "turns", "SAMPLES", "CHUNK", "PLACE_CELL", "NORMAL_ERROR"]
 
-#: oriented points sampled on a closed-form surface (a mesh uses its vertices)
+#: oriented points sampled on a closed-form surface (a mesh: as many as its vertices, evenly over its surface)
 SAMPLES = 6000
 #: (place, turn) pairs handled at once
 CHUNK = 200_000
@@ -162,7 +162,8 @@ def pair_stage(held, indices, touches: list, pair: tuple, normal_error: float, o
         reach = scale * max(float(np.max(np.linalg.norm(c - ci, axis=1))) for c in first)
         R, t = [], []
         for sign in (1.0, -1.0):
-            Rs, ts = _candidates(points, normals, turn, normal_error, spacing, tree, ci * scale, sign * ni, cj * scale, nj, reach)
+            Rs, ts = _candidates(points, normals, turn, normal_error, spacing, tree, ci * scale, sign * ni,
+                                 cj * scale, nj, reach)
             R.append(Rs)
             t.append(ts)
         R, t = np.concatenate(R), np.concatenate(t)
