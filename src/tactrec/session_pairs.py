@@ -98,9 +98,9 @@ def _oriented_points(model):
 
 def _candidates(points, normals, turn, error, spacing, tree, ci, ni, cj, nj, reach):
     """Poses ``R (h, 3, 3), t (h, 3)`` (model = R data + t) that put contact ``ci`` on a sample
-    with normal ``ni`` onto its normal and contact ``cj`` within ``spacing`` of a sample whose
-    normal agrees with ``nj`` (either sign) within ``error`` and the two samples' ``turn``; see
-    the module text.  The turn is stepped so that ``cj``, or a point ``reach`` from ``ci`` when that is
+    with normal ``ni`` onto its normal and contact ``cj`` near a sample (``spacing``, plus how far
+    a tilt of ``ni`` by ``error`` and the place's ``turn`` moves ``cj``) whose normal agrees with
+    ``nj`` (either sign) within ``error`` and the two samples' ``turn``; see the module text.  The turn is stepped so that ``cj``, or a point ``reach`` from ``ci`` when that is
     farther, moves at most ``spacing`` a step."""
     e1, e2 = (v[0] for v in tangents(ni[None]))
     Fi = np.stack([e1, e2, ni], axis=1)                                     # touch frame, columns
