@@ -35,6 +35,7 @@ a search would, and the session's joint fit (step 2) takes them up.
 from __future__ import annotations
 
 import dataclasses
+from typing import NamedTuple
 
 import numpy as np
 
@@ -75,9 +76,21 @@ def turns(normals: np.ndarray, pairs: np.ndarray) -> np.ndarray:
     return out
 
 
-def _oriented_points(model):
-    """A model's oriented samples: points ``(n, 3)``, unit normals ``(n, 3)``, their :func:`turns`
-    ``(n,)``, their spacing (model units) and a k-d tree of the points."""
+class _Samples(NamedTuple):
+    """A model's oriented samples (model units), built once per model and process."""
+
+    points: np.ndarray          # (n, 3)
+    normals: np.ndarray         # (n, 3), unit
+    turn: np.ndarray            # (n,) radians, :func:`turns`
+    spacing: float
+    tree: object                # k-d tree of the points
+    places: np.ndarray          # (p,) the samples a touch's contact is put on, one per cell
+    t1: np.ndarray              # (n, 3) tangents completing each normal to a frame
+    t2: np.ndarray              # (n, 3)
+
+
+def _oriented_points(model) -> _Samples:
+    """A model's oriented samples (module text)."""
     from scipy.spatial import cKDTree
 
     if model.kind == "mesh":
@@ -93,28 +106,30 @@ def _oriented_points(model):
         points, normals = np.array([f.point for f in frames]), np.array([f.normal for f in frames])
     tree = cKDTree(points)
     spacing = 1.5 * float(np.median(tree.query(points, k=2)[0][:, 1]))
-    return points, normals, turns(normals, tree.query_pairs(spacing, output_type="ndarray")), spacing, tree
+    cell = np.floor((points - points.min(axis=0)) / (PLACE_CELL * spacing)).astype(np.int64)
+    places = np.sort(np.unique(cell, axis=0, return_index=True)[1])
+    return _Samples(points, normals, turns(normals, tree.query_pairs(spacing, output_type="ndarray")), spacing,
+                    tree, places, *tangents(normals))
 
 
-def _candidates(points, normals, turn, error, spacing, tree, ci, ni, cj, nj, reach):
-    """Poses ``R (h, 3, 3), t (h, 3)`` (model = R data + t) that put contact ``ci`` on a sample
-    with normal ``ni`` onto its normal and contact ``cj`` near a sample (``spacing``, plus how far
-    a tilt of ``ni`` by ``error`` and the place's ``turn`` moves ``cj``) whose normal agrees with
-    ``nj`` (either sign) within ``error`` and the two samples' ``turn``; see the module text.  The turn is stepped so that ``cj``, or a point ``reach`` from ``ci`` when that is
-    farther, moves at most ``spacing`` a step."""
+def _candidates(samples: _Samples, error, ci, ni, cj, nj, reach):
+    """Poses ``R (h, 3, 3), t (h, 3)`` (model = R data + t) that put contact ``ci`` on one of the
+    ``samples``' places with normal ``ni`` onto its normal and contact ``cj`` near a sample (the
+    spacing, plus how far a tilt of ``ni`` by ``error`` and the place's turn moves ``cj``) whose
+    normal agrees with ``nj`` (either sign) within ``error`` and the two samples' turns; see the
+    module text.  The turn is stepped so that ``cj``, or a point ``reach`` from ``ci`` when that
+    is farther, moves at most the spacing a step."""
+    points, normals, turn, spacing, tree, places, t1, t2 = samples
     e1, e2 = (v[0] for v in tangents(ni[None]))
     Fi = np.stack([e1, e2, ni], axis=1)                                     # touch frame, columns
     v = (cj - ci) @ Fi                                                      # (x, y, z) in it
     rho, psi = float(np.hypot(v[0], v[1])), float(np.arctan2(v[1], v[0]))
     steps = max(12, int(np.ceil(2 * np.pi * max(rho, reach) / spacing)))
     theta = 2 * np.pi * np.arange(steps) / steps
-    t1, t2 = tangents(normals)
     nj_local = nj @ Fi                                                      # (3,)
     cos, sin = np.cos(theta + psi), np.sin(theta + psi)
     found = []
     per = max(1, CHUNK // steps)
-    cell = np.floor((points - points.min(axis=0)) / (PLACE_CELL * spacing)).astype(np.int64)
-    places = np.sort(np.unique(cell, axis=0, return_index=True)[1])
     for lo in range(0, len(places), per):
         a = places[lo:lo + per]
         p = points[a, None] + v[2] * normals[a, None] \
@@ -157,13 +172,12 @@ def pair_stage(held, indices, touches: list, pair: tuple, normal_error: float, o
         key = ("pairs", index)
         if key not in held.samples:
             held.samples[key] = _oriented_points(model)
-        points, normals, turn, spacing, tree = held.samples[key]
+        samples = held.samples[key]
         (first, ci, ni), (_, cj, nj) = touches[pair[0]], touches[pair[1]]
         reach = scale * max(float(np.max(np.linalg.norm(c - ci, axis=1))) for c in first)
         R, t = [], []
         for sign in (1.0, -1.0):
-            Rs, ts = _candidates(points, normals, turn, normal_error, spacing, tree, ci * scale, sign * ni,
-                                 cj * scale, nj, reach)
+            Rs, ts = _candidates(samples, normal_error, ci * scale, sign * ni, cj * scale, nj, reach)
             R.append(Rs)
             t.append(ts)
         R, t = np.concatenate(R), np.concatenate(t)
@@ -171,16 +185,16 @@ def pair_stage(held, indices, touches: list, pair: tuple, normal_error: float, o
             out.append(None)
             continue
         curves = [c * scale for curves, _, _ in touches for c in curves]
-        x = np.concatenate(curves)
-        out.append(_scored(model, R, t, curves, x, dict(options, _samples=held.samples[key]), scale))
+        out.append(_scored(model, samples, R, t, curves, options, scale))
     return out
 
 
-def _scored(model, R, t, curves, x, options, scale):
-    """The candidates ``R, t`` scored and refined (module text): ``R, t, error`` (data units) best
-    first, and the closest-point queries spent."""
+def _scored(model, samples: _Samples, R, t, curves, options, scale):
+    """The candidates ``R, t`` scored on ``curves`` (model units) and refined (module text):
+    ``R, t, error`` (data units) best first, and the closest-point queries spent."""
     ends = subset(curves, 2)
-    points, normals, _, _, tree = options["_samples"]
+    x = np.concatenate(curves)
+    points, normals, tree = samples.points, samples.normals, samples.tree
 
     def plane(x):                           # distance to the nearest sample's tangent plane
         _, b = tree.query(x)
