@@ -96,7 +96,12 @@ def _oriented_points(model) -> _Samples:
     if model.kind == "mesh":
         import trimesh
 
-        points, face = trimesh.sample.sample_surface_even(model._trimesh, len(model.vertices), seed=0)
+        # trimesh's sample_surface_even, less its warning when fewer than asked survive: three
+        # times as many uniform samples, those closer than the spacing they would have removed
+        mesh, count = model._trimesh, len(model.vertices)
+        points, face = trimesh.sample.sample_surface(mesh, 3 * count, seed=0)
+        points, kept = trimesh.points.remove_close(points, float(np.sqrt(mesh.area / (3 * count))))
+        points, face = points[:count], face[kept][:count]
         corners = model.vertices[model.faces[face]]
         weights = trimesh.triangles.points_to_barycentric(corners, points)
         normals = np.einsum("nk,nkj->nj", weights, model.vertex_normals[model.faces[face]])
