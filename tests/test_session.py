@@ -267,3 +267,27 @@ def test_a_sessions_fits_are_the_same_in_worker_processes():
             runs[workers] = out
     assert runs[1] == runs[2]
     assert max(searched) >= 1, "no add searched with the other touches in the score: a fit after one is not compared"
+
+
+def test_multi_touch_summary_reports_the_add_cost_per_session_size():
+    """The add-cost ratios are per added touch, pooled and per session size, and a session that
+    stopped early adds nothing to the later sizes."""
+    from tactrec.bench.multi_touch import summary
+
+    def step(correct, confidence, seconds, own):
+        return {"best": "a" if correct else "b", "correct": correct, "confidence": confidence,
+                "seconds": seconds, "own_seconds": own, "slipped": []}
+
+    long = [step(True, 0.5, 1.0, 1.0), step(True, 0.9, 3.0, 1.0), step(True, 0.99, 8.0, 2.0),
+            step(True, 1.0, 1.0, 1.0), step(True, 1.0, 6.0, 2.0)]
+    short = [step(False, 0.4, 2.0, 2.0), step(True, 1.0, 2.0, 2.0)]
+    rows = [{"random": long, "next": short}, {"random": long, "next": long}]
+    s = summary(rows)
+    by_n = s["next"]["add_over_own_by_touches"]
+    assert [b["adds"] for b in by_n] == [2, 1, 1, 1]
+    assert by_n[0]["median"] == pytest.approx(2.0)          # ratios 1 and 3
+    assert by_n[1]["median"] == pytest.approx(4.0) and by_n[3]["median"] == pytest.approx(3.0)
+    assert s["next"]["add_over_own"]["median"] == pytest.approx(3.0)   # ratios 1, 3, 4, 1, 3
+    assert s["random"]["add_over_own_by_touches"][0]["adds"] == 2
+    assert s["next"]["per_touches"][0]["accuracy_percent"] == pytest.approx(50.0)
+    assert s["next"]["mean_touches_to_0.99"] == pytest.approx(2.5)

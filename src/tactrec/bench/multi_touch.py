@@ -173,6 +173,11 @@ def _quantiles(values) -> dict:
     return {"median": float(np.median(v)), "p95": float(np.percentile(v, 95)), "max": float(v.max())}
 
 
+def _over_own(step: dict) -> float | None:
+    """An add's time over the added touch's own recognition (None where that was not timed)."""
+    return step["seconds"] / step["own_seconds"] if step.get("own_seconds") else None
+
+
 def summary(rows: list[dict]) -> dict:
     out = {}
     first = [r["next"][0]["seconds"] for r in rows] + [r["random"][0]["seconds"] for r in rows]
@@ -187,11 +192,18 @@ def summary(rows: list[dict]) -> dict:
         decide = [next((i + 1 for i, s in enumerate(r[strategy]) if s["confidence"] >= 0.99), TOUCHES)
                   for r in rows]
         adds = [s["seconds"] for r in rows for s in r[strategy][1:]]
-        own = [s["seconds"] / s["own_seconds"] for r in rows for s in r[strategy][1:] if s.get("own_seconds")]
+        own = [x for r in rows for x in map(_over_own, r[strategy][1:]) if x is not None]
+        # an add to a session of n touches, against the added touch's own recognition: a session that
+        # stops early leaves its easy adds out of the pooled median, so the medians per n are reported too
+        by_n = []
+        for n in range(1, TOUCHES):
+            ratios = [_over_own(r[strategy][n]) for r in rows if len(r[strategy]) > n]
+            ratios = [x for x in ratios if x is not None]
+            by_n.append({"touches_before": n, "adds": len(ratios), **_quantiles(ratios)})
         out[strategy] = {"per_touches": per_k, "mean_touches_to_0.99": float(np.mean(decide)),
                          "add_seconds": _quantiles(adds),
                          "add_ratio_of_medians": float(np.median(adds) / np.median(first)) if adds else None,
-                         "add_over_own": _quantiles(own),
+                         "add_over_own": _quantiles(own), "add_over_own_by_touches": by_n,
                          "propose_seconds": _quantiles([s["propose_seconds"] for r in rows for s in r[strategy]
                                                         if "propose_seconds" in s])}
     out["first_touch_seconds"] = _quantiles(first)
@@ -270,6 +282,14 @@ def run(*, out, instances: int = 10, seed: int = 0, jobs: int | None = None, qui
             own = "-" if o["median"] is None else f"{o['median']:.2f} / {o['p95']:.2f} / {o['max']:.2f}"
             lines.append(f"| {name} ({s['sessions']}) | {strategy} | " + " | ".join(cells)
                          + f" | {st['mean_touches_to_0.99']:.2f} | {adds} | {ratio} | {own} |")
+    lines += ["", "Adding a touch to a session of n touches, against the added touch's own recognition: median "
+              "(adds).", "", "| set | strategy | " + " | ".join(f"n = {n}" for n in range(1, TOUCHES)) + " |",
+              "|---|---|" + "---|" * (TOUCHES - 1)]
+    for name, s in table["summary"].items():
+        for strategy in STRATEGIES:
+            cells = ["-" if b["median"] is None else f"{b['median']:.2f} ({b['adds']})"
+                     for b in s[strategy]["add_over_own_by_touches"]]
+            lines.append(f"| {name} | {strategy} | " + " | ".join(cells) + " |")
     table["text"] = "\n".join(lines) + "\n"
     write_text_atomic(out / "multi-touch.md", table["text"])
     _plot(dict(table, records_by_set=by_set), out)
