@@ -23,13 +23,7 @@ touch and a joint refinement (more searches only in step 5):
 4. a touch that no pose fitting most touches fits is reported as *slipped*
    (the contact moved, or the object did) and left out of every fit and
    probability, never averaged in;
-5. when the best model's joint pose is not a fit under the touches' noise
-   (its mean distance beyond three standard errors of the points-weighted
-   mean of their :func:`~tactrec.probability.fit_limit`), the *pair search*
-   (:mod:`tactrec.session_pairs`) poses every model from the new touch and
-   the kept touch farthest from it, over every place of the model and with
-   no curvature ranking, and steps 2-4 run again on its poses; then, when
-   the best model's pose is not consistent with every touch not set
+5. when the best model's pose is not consistent with every touch not set
    aside before this one (the new touch and any step 4 now calls slipped
    included: a pose the earlier searches missed can make a good touch look
    slipped), the new touch is searched again with the earlier touches'
@@ -56,7 +50,16 @@ touch and a joint refinement (more searches only in step 5):
    mean of each touch's best fit on any model, or of ``fit_limit``,
    whichever is larger): the joint form of the single search's rule, with
    no allowance above it, since a search that stops at a pose a little off
-   hands the lead to another model;
+   hands the lead to another model.  Then, when the best model's joint pose
+   is still not a fit under the touches' noise (its mean distance beyond
+   three standard errors of the points-weighted mean of their
+   :func:`~tactrec.probability.fit_limit`), the *pair search*
+   (:mod:`tactrec.session_pairs`) poses every model from the new touch and
+   the kept touch farthest from it, over every place of the model and with
+   no curvature ranking, and steps 2-4 run again on its poses.  The
+   searches with the other touches in the score come first: each is
+   bounded by a touch's own budget, while the pair search costs several
+   times a touch's own search;
 6. the probabilities (:mod:`tactrec.probability`) come from every model's
    distances to the points of all touches kept, under its joint pose.
 """
@@ -154,13 +157,15 @@ class Session:
         self._fits = {}
         self.result = self._joint_fit()
         if self.joint_search and earlier:
+            # the searches bounded by a touch's own budget first, the pair search over every place of
+            # every model only while no pose found fits the touches at their noise
+            if self.recognizer.method.scores_context:
+                self._search_jointly(slipped)
             if not self._fitted():
                 found = session_pairs.search(self, [i for i in range(len(self.features)) if i not in slipped])
                 if found is not None:
                     self.searches.append(found)
                     self.result = self._joint_fit(found)
-            if self.recognizer.method.scores_context:
-                self._search_jointly(slipped)
         self.result = dataclasses.replace(self.result, seconds=time.perf_counter() - start)
         return self.result
 
