@@ -192,14 +192,14 @@ def summary(rows: list[dict]) -> dict:
         decide = [next((i + 1 for i, s in enumerate(r[strategy]) if s["confidence"] >= 0.99), TOUCHES)
                   for r in rows]
         adds = [s["seconds"] for r in rows for s in r[strategy][1:]]
-        own = [x for r in rows for x in map(_over_own, r[strategy][1:]) if x is not None]
         # an add to a session of n touches, against the added touch's own recognition: a session that
         # stops early leaves its easy adds out of the pooled median, so the medians per n are reported too
-        by_n = []
+        by_n, own = [], []
         for n in range(1, TOUCHES):
             ratios = [_over_own(r[strategy][n]) for r in rows if len(r[strategy]) > n]
             ratios = [x for x in ratios if x is not None]
             by_n.append({"touches_before": n, "adds": len(ratios), **_quantiles(ratios)})
+            own += ratios
         out[strategy] = {"per_touches": per_k, "mean_touches_to_0.99": float(np.mean(decide)),
                          "add_seconds": _quantiles(adds),
                          "add_ratio_of_medians": float(np.median(adds) / np.median(first)) if adds else None,
