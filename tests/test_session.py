@@ -291,3 +291,35 @@ def test_multi_touch_summary_reports_the_add_cost_per_session_size():
     assert s["random"]["add_over_own_by_touches"][0]["adds"] == 2
     assert s["next"]["per_touches"][0]["accuracy_percent"] == pytest.approx(50.0)
     assert s["next"]["mean_touches_to_0.99"] == pytest.approx(2.5)
+
+
+def test_multi_touch_tells_a_found_true_pose_from_a_missed_one(small):
+    """The bench's check of the true pose: a session that found it (seeded noisy touches of a small
+    mesh) passes under the true world pose, and fails once its pose of the true model fits the
+    touches 0.02 mm worse than the truth (a miss of the searches), or when it has no pose of it."""
+    import dataclasses
+
+    from tactrec.bench.multi_touch import _truth_found, summary
+
+    entry = small[0]
+    Rw, tw = random_rigid_motion(instance_rng(11, 0), extent=300.0)
+    world2model = (Rw.T, -Rw.T @ tw, 1.0)
+    with Recognizer(small) as recognizer:
+        session = recognizer.session()
+        for i in range(2):
+            touch = simulate_random_touch(entry.model, rng=instance_rng(12, i), **NOISY)
+            session.add(touch, sensor_to_world(touch, (Rw, tw)))
+    assert session.result.best == entry.name
+    assert _truth_found(session, entry, world2model)
+    h = session.result.hypothesis(entry.name)
+    worse = dataclasses.replace(h, per_touch=h.per_touch + 0.02)
+    session.result = dataclasses.replace(session.result, ranking=[worse if r is h else r
+                                                                  for r in session.result.ranking])
+    assert not _truth_found(session, entry, world2model)
+    session.result = dataclasses.replace(session.result, ranking=[r for r in session.result.ranking if r is not worse])
+    assert not _truth_found(session, entry, world2model)
+    step = {"best": "a", "correct": True, "confidence": 1.0, "seconds": 1.0, "own_seconds": 1.0, "slipped": []}
+    rows = [{s: [dict(step, truth_found=True), dict(step, truth_found=f)] for s in ("random", "next")}
+            for f in (True, False)]
+    per_k = summary(rows)["next"]["per_touches"]
+    assert [p["truth_found_percent"] for p in per_k[:2]] == [100.0, 50.0]

@@ -26,12 +26,16 @@ holds 99% of the probability); its later counts keep its last answer.  Sets:
     ``ceil(instances / 10)`` sessions per scan.
 
 Reported per set and strategy, after 1 to 5 touches: accuracy, mean
-confidence, ECE; the touches a session takes to reach confidence 0.99 (or 5);
-and the cost of adding a touch against one touch's recognition, two ways: against the
-first touches' (same run; medians), and against the added touch's own recognition,
-which every add runs first (the ratio per add; median, p95, max).  The first
-touches are the protocol's and often settle early, while later touches land
-anywhere on a face, so the first comparison mixes in how hard the touches are.
+confidence, ECE, and how often the session has found the true pose (its pose
+of the true model fits the touches kept as well as the true pose does: within
+three standard errors of its mean distance), which tells a miss of the
+searches from data another model fits as well; the touches a session takes to
+reach confidence 0.99 (or 5); and the cost of adding a touch against one
+touch's recognition, two ways: against the first touches' (same run;
+medians), and against the added touch's own recognition, which every add runs
+first (the ratio per add; median, p95, max).  The first touches are the
+protocol's and often settle early, while later touches land anywhere on a
+face, so the first comparison mixes in how hard the touches are.
 Plots: accuracy against touches, and the reliability of the confidence.
 """
 
@@ -45,6 +49,9 @@ import numpy as np
 
 from ..features import Touch
 from ..io.atomic import write_text_atomic
+from ..probability import fit_standard_error
+from ..session import CONSISTENT_SE
+from ..session_fit import per_touch
 from ..simulation import random_rigid_motion, sensor_to_world, simulate_world_touch
 from ..surfaces import BUILTIN_SETS
 from .calibration import expected_calibration_error
@@ -124,6 +131,24 @@ def _next_touch(strategy, session, entry, world2model, spec, rng):
     return None
 
 
+def _truth_found(session, entry, world2model) -> bool:
+    """Whether the session's pose of the true model fits the touches kept as well as the true pose
+    ``world2model`` does (points-weighted mean distance within :data:`~tactrec.session.CONSISTENT_SE`
+    standard errors of the truth's)."""
+    result = session.result
+    h = result.hypothesis(entry.name)
+    if h is None:
+        return False
+    use = [i for i in range(len(session.features)) if i not in result.slipped]
+    sizes = np.array([len(session.features[i].points) for i in use], dtype=np.float64)
+    R, t, s = world2model
+    truth = per_touch(entry.model, np.asarray(R)[None], np.asarray(t)[None],
+                      [session.features[i].points for i in use], s)[0]
+    found = float((sizes * np.asarray(h.per_touch)[use]).sum() / sizes.sum())
+    best = float((sizes * truth).sum() / sizes.sum())
+    return bool(found <= best + CONSISTENT_SE * fit_standard_error(best, int(sizes.sum())))
+
+
 def _session(task) -> dict:
     kind, m_index, instance, seed = task
     db, entry, first = _first(kind, m_index, instance, seed)
@@ -143,7 +168,8 @@ def _session(task) -> dict:
             seconds = time.perf_counter() - start
             steps.append({"best": result.best, "correct": result.best == entry.name,
                           "confidence": result.confidence, "seconds": seconds, "slipped": list(result.slipped),
-                          "own_seconds": session.solo[-1].seconds})
+                          "own_seconds": session.solo[-1].seconds,
+                          "truth_found": _truth_found(session, entry, world2model)})
             if len(steps) >= TOUCHES:
                 break
             start = time.perf_counter()
@@ -187,8 +213,10 @@ def summary(rows: list[dict]) -> dict:
             states = [_at(r[strategy], k) for r in rows]
             conf = [s["confidence"] for s in states]
             ok = [s["correct"] for s in states]
+            found = [s["truth_found"] for s in states if "truth_found" in s]
             per_k.append({"touches": k, "accuracy_percent": 100.0 * float(np.mean(ok)),
-                          "mean_confidence": float(np.mean(conf)), "ece": expected_calibration_error(conf, ok)})
+                          "mean_confidence": float(np.mean(conf)), "ece": expected_calibration_error(conf, ok),
+                          "truth_found_percent": 100.0 * float(np.mean(found)) if found else None})
         decide = [next((i + 1 for i, s in enumerate(r[strategy]) if s["confidence"] >= 0.99), TOUCHES)
                   for r in rows]
         adds = [s["seconds"] for r in rows for s in r[strategy][1:]]
@@ -289,6 +317,15 @@ def run(*, out, instances: int = 10, seed: int = 0, jobs: int | None = None, qui
         for strategy in STRATEGIES:
             cells = ["-" if b["median"] is None else f"{b['median']:.2f} ({b['adds']})"
                      for b in s[strategy]["add_over_own_by_touches"]]
+            lines.append(f"| {name} | {strategy} | " + " | ".join(cells) + " |")
+    lines += ["", "Sessions whose pose of the true model fits the touches as well as the true pose does, after "
+              "each touch count (a wrong answer with the true pose found is the data's, not the searches').", "",
+              "| set | strategy | " + " | ".join(str(k) for k in range(1, TOUCHES + 1)) + " |",
+              "|---|---|" + "---|" * TOUCHES]
+    for name, s in table["summary"].items():
+        for strategy in STRATEGIES:
+            cells = ["-" if p["truth_found_percent"] is None else f"{p['truth_found_percent']:.0f}%"
+                     for p in s[strategy]["per_touches"]]
             lines.append(f"| {name} | {strategy} | " + " | ".join(cells) + " |")
     table["text"] = "\n".join(lines) + "\n"
     write_text_atomic(out / "multi-touch.md", table["text"])
