@@ -49,8 +49,7 @@ import numpy as np
 
 from ..features import Touch
 from ..io.atomic import write_text_atomic
-from ..probability import fit_standard_error
-from ..session import CONSISTENT_SE
+from ..session import _allowed
 from ..session_fit import per_touch
 from ..simulation import random_rigid_motion, sensor_to_world, simulate_world_touch
 from ..surfaces import BUILTIN_SETS
@@ -133,8 +132,8 @@ def _next_touch(strategy, session, entry, world2model, spec, rng):
 
 def _truth_found(session, entry, world2model) -> bool:
     """Whether the session's pose of the true model fits the touches kept as well as the true pose
-    ``world2model`` does (points-weighted mean distance within :data:`~tactrec.session.CONSISTENT_SE`
-    standard errors of the truth's)."""
+    ``world2model`` does (points-weighted mean distance within the session's own allowance,
+    :data:`~tactrec.session.CONSISTENT_SE` standard errors, of the truth's)."""
     result = session.result
     h = result.hypothesis(entry.name)
     if h is None:
@@ -146,7 +145,7 @@ def _truth_found(session, entry, world2model) -> bool:
                       [session.features[i].points for i in use], s)[0]
     found = float((sizes * np.asarray(h.per_touch)[use]).sum() / sizes.sum())
     best = float((sizes * truth).sum() / sizes.sum())
-    return bool(found <= best + CONSISTENT_SE * fit_standard_error(best, int(sizes.sum())))
+    return bool(found <= _allowed(best, int(sizes.sum())))
 
 
 def _session(task) -> dict:
