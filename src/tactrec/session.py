@@ -75,9 +75,9 @@ from .errors import InputError
 from .io.session import SessionTouch, rigid_pose
 from .io.touch import TactileData
 from .linalg import clearly_less
-from .probability import evidence, fit_limit, fit_standard_error, planes, residuals
-from . import session_pairs
-from .session_fit import fit_stage, per_touch, refine
+from .probability import evidence, fit_limit, fit_standard_error, residuals
+from . import session_family, session_pairs
+from .session_fit import fit_stage, per_touch
 from .session_result import Hypothesis, SessionResult
 
 
@@ -87,26 +87,15 @@ __all__ = ["Session", "SessionResult", "Hypothesis", "CONSISTENT_SE"]
 CONSISTENT_SE = 3.0
 #: on noise-free data a fit is within this fraction of the touch's radius, for a method without a ``floor`` of its own
 FLOOR = 1e-3
-#: poses kept per model (the best and others the touches fit as well), and how far apart their contacts must be
-#: (a fraction of the touches' reach)
-FAMILY, APART = 5, 0.5
 #: step 5 searches from this many touches, newest first: the new one and the one kept before it, so a
 #: touch may be searched with the others in its score when it is added and again when the next one is
 STARTS = 2
-#: a motion is free when the fit's curvature along it is below this fraction of the largest; Gauss-Newton
-#: steps of a pose moved along it
-FREE, FAMILY_ITERATIONS = 1e-3, 6
 
 
 def _allowed(fit: float, points: int) -> float:
     """The largest mean distance as good as a fit of ``fit`` over ``points`` points: within
     :data:`CONSISTENT_SE` of its standard errors."""
     return fit + CONSISTENT_SE * fit_standard_error(fit, points)
-
-
-def _normals(model, points: np.ndarray) -> np.ndarray:
-    """Unit normals ``(m, 3)`` of the planes ``points (m, 3)`` (model units) are measured against."""
-    return planes(model, points)[1]
 
 
 class Session:
@@ -315,65 +304,15 @@ class Session:
 
     def family(self, name: str) -> np.ndarray:
         """Model ``name``'s pose and the poses along the motions its touches leave free, ``(p, 3, 4)``
-        (:meth:`_family`; computed when asked, for the models :meth:`next` weighs)."""
+        (:func:`tactrec.session_family.free_poses`; computed when asked, for the models :meth:`next` weighs)."""
         h = self._joint[name]
         if h.poses is None:
             model = next(e.model for e in self.recognizer.models if e.name == name)
             use = np.array([i not in self.result.slipped for i in range(len(self.features))])
             x = np.concatenate([f.points for f, u in zip(self.features, use) if u]) * h.scale
-            h = dataclasses.replace(h, poses=self._family(model, h, use, x))
+            h = dataclasses.replace(h, poses=session_family.free_poses(self, model, h, use, x))
             self._joint[name] = h
         return h.poses
-
-    def _family(self, model, best: Hypothesis, use: np.ndarray, x: np.ndarray) -> np.ndarray:
-        """``best``'s pose, then poses along the motions the touches leave free (the directions
-        of least curvature of the fit's point-to-plane normal matrix, below :data:`FREE` x its
-        largest): each moved by a quarter and a half of the model's size both ways, refined,
-        and kept if every touch used is still consistent with it (see :meth:`_distinct`)."""
-        from .registration.result import rotations_from_vectors
-
-        moved = x @ best.rotation.T + best.translation
-        n = _normals(model, moved)
-        J = np.concatenate([np.cross(moved, n), n], axis=1)                             # (m, 6)
-        values, vectors = np.linalg.eigh(J.T @ J)
-        centre = moved.mean(axis=0)
-        R, t = [], []
-        for k in np.nonzero(values < FREE * values[-1])[0]:
-            w, u = vectors[:3, k], vectors[3:, k]
-            step = np.linalg.norm(np.cross(w, centre) + u)          # the data centre's speed
-            if step <= 0:
-                continue
-            # the screw the twist (w, u) generates: a turn about the axis through q, a slide along it
-            turning = np.linalg.norm(w) * model.size > 1e-6 * np.linalg.norm(u)
-            q = np.cross(w, u) / (w @ w) if turning else np.zeros(3)
-            slide = (w @ u) / (w @ w) * w if turning else u
-            for f in (-0.5, -0.25, 0.25, 0.5):
-                a = f * model.size / step
-                dR = rotations_from_vectors((a * w)[None])[0] if turning else np.eye(3)
-                R.append(dR @ best.rotation)
-                t.append(dR @ (best.translation - q) + q + a * slide)
-        if not R:
-            return self._distinct(best, np.empty((0, 3, 3)), np.empty((0, 3)))
-        R, t, _ = refine(model, np.array(R), np.array(t), x, FAMILY_ITERATIONS)
-        per = self._per_touch(model, R, t, best.scale)
-        fits = self._consistent(best.model, per)[:, use].all(axis=1)
-        return self._distinct(best, R[fits], t[fits])
-
-    def _distinct(self, best: Hypothesis, R: np.ndarray, t: np.ndarray) -> np.ndarray:
-        """``best``'s pose and up to :data:`FAMILY` - 1 of the poses ``R, t`` that put the touches'
-        contacts more than :data:`APART` x the touches' reach from where every pose kept puts them."""
-        contacts = np.array([f.geometry.contact for f in self.features]) * best.scale
-        reach = max(f.reach for f in self.features) * best.scale
-        kept = [np.concatenate([best.rotation, best.translation[:, None]], axis=1)]
-        where = [contacts @ best.rotation.T + best.translation]
-        for Rk, tk in zip(R, t):
-            if len(kept) >= FAMILY:
-                break
-            x = contacts @ Rk.T + tk
-            if all(np.max(np.linalg.norm(x - w, axis=1)) > APART * reach for w in where):
-                kept.append(np.concatenate([Rk, tk[:, None]], axis=1))
-                where.append(x)
-        return np.array(kept)
 
     def _joint_fit(self, fresh=None) -> SessionResult:
         """Steps 2-4 and 6, after the search ``fresh`` of step 5 (None: after the touch's own)."""

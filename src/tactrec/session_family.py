@@ -1,0 +1,75 @@
+"""A session's pose families: the poses along the motions its touches leave free.
+
+Touches on a cylinder leave a slide along its axis and a turn about it free;
+on a flat patch, two slides and a turn.  The poses along those motions fit
+the touches as well as the best, and :func:`tactrec.proposal.propose` weighs
+them as hypotheses of their own (:meth:`tactrec.session.Session.family`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .probability import planes
+from .session_fit import refine
+
+__all__ = ["free_poses", "distinct", "FAMILY", "APART", "FREE", "FAMILY_ITERATIONS"]
+
+#: poses kept per model (the best and others the touches fit as well), and how far apart their contacts must be
+#: (a fraction of the touches' reach)
+FAMILY, APART = 5, 0.5
+#: a motion is free when the fit's curvature along it is below this fraction of the largest; Gauss-Newton
+#: steps of a pose moved along it
+FREE, FAMILY_ITERATIONS = 1e-3, 6
+
+
+def free_poses(session, model, best, use: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``best``'s pose, then poses along the motions the touches leave free (the directions
+    of least curvature of the fit's point-to-plane normal matrix, below :data:`FREE` x its
+    largest): each moved by a quarter and a half of the model's size both ways, refined,
+    and kept if every touch used is still consistent with it (see :func:`distinct`)."""
+    from .registration.result import rotations_from_vectors
+
+    moved = x @ best.rotation.T + best.translation
+    n = planes(model, moved)[1]
+    J = np.concatenate([np.cross(moved, n), n], axis=1)                             # (m, 6)
+    values, vectors = np.linalg.eigh(J.T @ J)
+    centre = moved.mean(axis=0)
+    R, t = [], []
+    for k in np.nonzero(values < FREE * values[-1])[0]:
+        w, u = vectors[:3, k], vectors[3:, k]
+        step = np.linalg.norm(np.cross(w, centre) + u)          # the data centre's speed
+        if step <= 0:
+            continue
+        # the screw the twist (w, u) generates: a turn about the axis through q, a slide along it
+        turning = np.linalg.norm(w) * model.size > 1e-6 * np.linalg.norm(u)
+        q = np.cross(w, u) / (w @ w) if turning else np.zeros(3)
+        slide = (w @ u) / (w @ w) * w if turning else u
+        for f in (-0.5, -0.25, 0.25, 0.5):
+            a = f * model.size / step
+            dR = rotations_from_vectors((a * w)[None])[0] if turning else np.eye(3)
+            R.append(dR @ best.rotation)
+            t.append(dR @ (best.translation - q) + q + a * slide)
+    if not R:
+        return distinct(session, best, np.empty((0, 3, 3)), np.empty((0, 3)))
+    R, t, _ = refine(model, np.array(R), np.array(t), x, FAMILY_ITERATIONS)
+    per = session._per_touch(model, R, t, best.scale)
+    fits = session._consistent(best.model, per)[:, use].all(axis=1)
+    return distinct(session, best, R[fits], t[fits])
+
+
+def distinct(session, best, R: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """``best``'s pose and up to :data:`FAMILY` - 1 of the poses ``R, t`` that put the touches'
+    contacts more than :data:`APART` x the touches' reach from where every pose kept puts them."""
+    contacts = np.array([f.geometry.contact for f in session.features]) * best.scale
+    reach = max(f.reach for f in session.features) * best.scale
+    kept = [np.concatenate([best.rotation, best.translation[:, None]], axis=1)]
+    where = [contacts @ best.rotation.T + best.translation]
+    for Rk, tk in zip(R, t):
+        if len(kept) >= FAMILY:
+            break
+        x = contacts @ Rk.T + tk
+        if all(np.max(np.linalg.norm(x - w, axis=1)) > APART * reach for w in where):
+            kept.append(np.concatenate([Rk, tk[:, None]], axis=1))
+            where.append(x)
+    return np.array(kept)
