@@ -179,16 +179,26 @@ class Session:
             self.searches.append(found)
             self.result = self._joint_fit(found)
 
+    def kept(self) -> list[int]:
+        """The touches the session's result uses: all but those it calls slipped."""
+        slipped = () if self.result is None else self.result.slipped
+        return [i for i in range(len(self.features)) if i not in slipped]
+
+    def allowed(self, fit: float, touches) -> float:
+        """The largest points-weighted mean distance over the touches ``touches`` (indices) as good
+        as a fit of ``fit``: within :data:`CONSISTENT_SE` standard errors over their points."""
+        return _allowed(fit, sum(len(self.features[i].points) for i in touches))
+
     def _fitted(self) -> bool:
         """Whether the best model's joint pose fits the touches kept as well as their noise allows
         (its mean distance within three standard errors of the points-weighted mean of their
         :func:`fit_limit`): then no search can fit them better."""
         if not self.result.ranking:
             return False
-        use = [i for i in range(len(self.features)) if i not in self.result.slipped]
+        use = self.kept()
         sizes = np.array([len(self.features[i].points) for i in use])
         limits = np.array([fit_limit(self.features[i], self._floor) for i in use])
-        return self.result.ranking[0].error <= _allowed(float((sizes * limits).sum() / sizes.sum()), int(sizes.sum()))
+        return self.result.ranking[0].error <= self.allowed(float((sizes * limits).sum() / sizes.sum()), use)
 
     def _explained(self, slipped: set) -> bool:
         """Whether the best model's joint pose is consistent with every touch but those ``slipped``

@@ -49,7 +49,6 @@ import numpy as np
 
 from ..features import Touch
 from ..io.atomic import write_text_atomic
-from ..session import _allowed
 from ..session_fit import per_touch
 from ..simulation import random_rigid_motion, sensor_to_world, simulate_world_touch
 from ..surfaces import BUILTIN_SETS
@@ -134,18 +133,17 @@ def _truth_found(session, entry, world2model) -> bool:
     """Whether the session's pose of the true model fits the touches kept as well as the true pose
     ``world2model`` does (points-weighted mean distance within the session's own allowance,
     :data:`~tactrec.session.CONSISTENT_SE` standard errors, of the truth's)."""
-    result = session.result
-    h = result.hypothesis(entry.name)
+    h = session.result.hypothesis(entry.name)
     if h is None:
         return False
-    use = [i for i in range(len(session.features)) if i not in result.slipped]
+    use = session.kept()
     sizes = np.array([len(session.features[i].points) for i in use], dtype=np.float64)
     R, t, s = world2model
     truth = per_touch(entry.model, np.asarray(R)[None], np.asarray(t)[None],
                       [session.features[i].points for i in use], s)[0]
     found = float((sizes * np.asarray(h.per_touch)[use]).sum() / sizes.sum())
     best = float((sizes * truth).sum() / sizes.sum())
-    return bool(found <= _allowed(best, int(sizes.sum())))
+    return bool(found <= session.allowed(best, use))
 
 
 def _session(task) -> dict:
