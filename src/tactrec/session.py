@@ -164,8 +164,7 @@ class Session:
         the models the new touch fits on its own whose pose does not fit them all, and stops once a
         pose fits the touches as well as their own searches fit each."""
         use = [i for i in range(len(self.features)) if i not in slipped]
-        sizes = np.array([len(self.features[i].points) for i in use])
-        fit = float((sizes * self._own_fits()[use]).sum() / sizes.sum())      # element-wise: no BLAS kernel
+        fit = self.pooled(self._own_fits()[use], use)
         for start in use[::-1][:STARTS]:
             if self._explained(slipped):
                 return
@@ -184,6 +183,11 @@ class Session:
         slipped = () if self.result is None else self.result.slipped
         return [i for i in range(len(self.features)) if i not in slipped]
 
+    def pooled(self, values, touches) -> float:
+        """The points-weighted mean of per-touch ``values`` (one per index of ``touches``)."""
+        sizes = np.array([len(self.features[i].points) for i in touches], dtype=np.float64)
+        return float((sizes * np.asarray(values, dtype=np.float64)).sum() / sizes.sum())   # element-wise: no BLAS
+
     def allowed(self, fit: float, touches) -> float:
         """The largest points-weighted mean distance over the touches ``touches`` (indices) as good
         as a fit of ``fit``: within :data:`CONSISTENT_SE` standard errors over their points."""
@@ -196,9 +200,8 @@ class Session:
         if not self.result.ranking:
             return False
         use = self.kept()
-        sizes = np.array([len(self.features[i].points) for i in use])
-        limits = np.array([fit_limit(self.features[i], self._floor) for i in use])
-        return self.result.ranking[0].error <= self.allowed(float((sizes * limits).sum() / sizes.sum()), use)
+        limits = [fit_limit(self.features[i], self._floor) for i in use]
+        return self.result.ranking[0].error <= self.allowed(self.pooled(limits, use), use)
 
     def _explained(self, slipped: set) -> bool:
         """Whether the best model's joint pose is consistent with every touch but those ``slipped``

@@ -137,13 +137,11 @@ def _truth_found(session, entry, world2model) -> bool:
     if h is None:
         return False
     use = session.kept()
-    sizes = np.array([len(session.features[i].points) for i in use], dtype=np.float64)
     R, t, s = world2model
     truth = per_touch(entry.model, np.asarray(R)[None], np.asarray(t)[None],
                       [session.features[i].points for i in use], s)[0]
-    found = float((sizes * np.asarray(h.per_touch)[use]).sum() / sizes.sum())
-    best = float((sizes * truth).sum() / sizes.sum())
-    return bool(found <= session.allowed(best, use))
+    best = session.pooled(truth, use)
+    return bool(session.pooled(np.asarray(h.per_touch)[use], use) <= session.allowed(best, use))
 
 
 def _session(task) -> dict:
