@@ -321,8 +321,9 @@ class Session:
         h = self._joint[name]
         if h.poses is None:
             model = next(e.model for e in self.recognizer.models if e.name == name)
-            use = np.array([i not in self.result.slipped for i in range(len(self.features))])
-            x = np.concatenate([f.points for f, u in zip(self.features, use) if u]) * h.scale
+            kept = self.kept()
+            use = np.isin(np.arange(len(self.features)), kept)
+            x = np.concatenate([self.features[i].points for i in kept]) * h.scale
             h = dataclasses.replace(h, poses=session_family.free_poses(self, model, h, use, x))
             self._joint[name] = h
         return h.poses
