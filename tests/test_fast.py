@@ -259,17 +259,21 @@ def test_a_callers_budget_caps_the_search_as_the_methods_own_budget_would(scans)
 
 
 def test_a_search_with_other_touches_in_its_score_tries_the_poses_the_budget_allows_the_touch(scans):
-    """Noisy touches of the mug searched on their own and with two nearby touches' curves in their
-    score (a session's step 5), under a small budget: the budget bounds the poses tried, so the
-    search with context goes no deeper than the tiers the budget allows the touch alone and
-    spends at most the budget times the points it scores per point of the touch; and it fits the
-    three touches together no worse than the touch's own search fits them."""
+    """20 noisy touches of the mug searched on their own and with two nearby touches' curves in
+    their score (a session's step 5), under a small budget.  On every touch the budget bounds the
+    poses tried: the search with context goes no deeper than the tiers the budget allows the touch
+    alone and spends at most the budget times the points it scores per point of the touch.  Its
+    pose is a search's, not a refinement of the touch's own, so it is not bound to fit the three
+    touches better on each; on at least 16 of the 20 it fits them no worse, and on the median
+    touch at most half as far (the context rules out the poses only the one touch allows)."""
     entries = [scans.get("mug"), scans.get("hammer")]
     model = entries[0].model
     rng = np.random.default_rng(5)
-    budget, searched = 20_000, 0
+    budget, ratios = 20_000, []
     with Recognizer(entries, budget=budget) as recognizer:
-        for i in range(6):
+        for i in range(40):
+            if len(ratios) == 20:
+                break
             v = int(rng.integers(len(model.vertices)))
             near = np.argsort(np.linalg.norm(model.vertices - model.vertices[v], axis=1))
 
@@ -293,9 +297,10 @@ def test_a_search_with_other_touches_in_its_score_tries_the_poses_the_budget_all
                 r = found.ranking[0]
                 return float(np.mean(entries[[e.name for e in entries].index(r.model)].model.distance(
                     every @ r.rotation.T + r.translation)))
-            assert mean(together) <= mean(alone) + 1e-9
-            searched += 1
-    assert searched >= 5
+            ratios.append(mean(together) / mean(alone))
+    assert len(ratios) == 20
+    assert np.sum(np.array(ratios) <= 1.0 + 1e-9) >= 16
+    assert np.median(ratios) <= 0.5
 
 
 def test_a_search_among_chosen_models_searches_those_alone_and_stops_at_its_callers_fit(scans):
