@@ -77,7 +77,7 @@ from .io.touch import TactileData
 from .linalg import clearly_less
 from .probability import evidence, fit_limit, fit_standard_error, residuals
 from . import session_family, session_pairs
-from .session_fit import fit_stage, per_touch
+from .session_fit import fit_stage
 from .session_result import Hypothesis, SessionResult
 
 
@@ -271,12 +271,9 @@ class Session:
                     poses.append((alt[:, :3], alt[:, 3], r.scale))
         return poses
 
-    def _per_touch(self, model, R, t, scale) -> np.ndarray:
-        """Mean distance of each touch's points under poses ``R (h, 3, 3), t (h, 3)``: ``(h, N)``, data units."""
-        return per_touch(model, R, t, [f.points for f in self.features], scale)
-
-    def _consistent(self, name: str, per_touch: np.ndarray) -> np.ndarray:
-        """Which touches are consistent with poses whose per-touch errors are ``per_touch (h, N)``."""
+    def consistent(self, name: str, per_touch: np.ndarray) -> np.ndarray:
+        """Which touches are consistent (module text, step 3) with poses of model ``name`` whose
+        per-touch mean distances (data units) are ``per_touch (h, N)``: ``(h, N)`` bool."""
         allowed = []
         for f, rec in zip(self.features, self.solo):
             r = next((r for r in rec.ranking if r.model == name and r.ok), None)
@@ -311,7 +308,7 @@ class Session:
                 err = float((per * weight).sum() / max(weight.sum(), 1))
                 if best is None or clearly_less(err, best.error):
                     best = Hypothesis(e.name, R, t, scale, err, per,
-                                      tuple(bool(c) for c in self._consistent(e.name, per[None])[0]))
+                                      tuple(bool(c) for c in self.consistent(e.name, per[None])[0]))
             done[e.name] = best
         return dict(done)
 

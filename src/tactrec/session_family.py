@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from .probability import planes
-from .session_fit import refine
+from .session_fit import per_touch, refine
 
 __all__ = ["free_poses", "distinct", "FAMILY", "APART", "FREE", "FAMILY_ITERATIONS"]
 
@@ -53,8 +53,8 @@ def free_poses(session, model, best, use: np.ndarray, x: np.ndarray) -> np.ndarr
     if not R:
         return distinct(session, best, np.empty((0, 3, 3)), np.empty((0, 3)))
     R, t, _ = refine(model, np.array(R), np.array(t), x, FAMILY_ITERATIONS)
-    per = session._per_touch(model, R, t, best.scale)
-    fits = session._consistent(best.model, per)[:, use].all(axis=1)
+    per = per_touch(model, R, t, [f.points for f in session.features], best.scale)
+    fits = session.consistent(best.model, per)[:, use].all(axis=1)
     return distinct(session, best, R[fits], t[fits])
 
 
