@@ -81,7 +81,7 @@ from .session_fit import fit_stage
 from .session_result import Hypothesis, SessionResult
 
 
-__all__ = ["Session", "SessionResult", "Hypothesis", "CONSISTENT_SE"]
+__all__ = ["Session", "SessionResult", "Hypothesis", "CONSISTENT_SE", "STAGES"]
 
 #: a touch is consistent with a pose when its mean distance is within this many standard errors of its own fit
 CONSISTENT_SE = 3.0
@@ -90,6 +90,10 @@ FLOOR = 1e-3
 #: step 5 searches from this many touches, newest first: the new one and the one kept before it, so a
 #: touch may be searched with the others in its score when it is added and again when the next one is
 STARTS = 2
+#: the parts of an add whose seconds :attr:`SessionResult.stages` gives: the touch's own search
+#: (step 1), the joint fits (steps 2-4 and 6, each time they run), the searches with the other
+#: touches in the score and the pair search (step 5)
+STAGES = ("own", "joint", "context", "pairs")
 
 
 def _allowed(fit: float, points: int) -> float:
@@ -122,6 +126,7 @@ class Session:
         self._joint: dict[str, Hypothesis] = {}
         self._fits: dict[bytes, dict[str, Hypothesis]] = {}   # this add's fits, per set of touches used
         self.result: SessionResult | None = None
+        self._stages: dict[str, float] = {}     # this add's seconds per stage
 
     def add(self, data: TactileData, sensor2world=None) -> SessionResult:
         """Add a touch (sensor frame; ``sensor2world`` a ``(rotation, translation)`` pair or None for
@@ -137,7 +142,8 @@ class Session:
         world = touch.in_world()
         slipped = set(self.result.slipped) if self.result is not None else set()
         earlier = any(i not in slipped for i in range(len(self.world)))
-        rec = self.recognizer.recognize(world)
+        self._stages = dict.fromkeys(STAGES, 0.0)
+        rec = self._timed("own", self.recognizer.recognize, world)
         self.touches.append(touch)
         self.world.append(world)
         self.solo.append(rec)
@@ -151,12 +157,21 @@ class Session:
             if self.recognizer.method.scores_context:
                 self._search_jointly(slipped)
             if not self._fitted():
-                found = session_pairs.search(self, [i for i in range(len(self.features)) if i not in slipped])
+                found = self._timed("pairs", session_pairs.search, self,
+                                    [i for i in range(len(self.features)) if i not in slipped])
                 if found is not None:
                     self.searches.append(found)
                     self.result = self._joint_fit(found)
-        self.result = dataclasses.replace(self.result, seconds=time.perf_counter() - start)
+        self.result = dataclasses.replace(self.result, seconds=time.perf_counter() - start, stages=self._stages)
         return self.result
+
+    def _timed(self, stage: str, fn, *args, **kwargs):
+        """``fn(*args, **kwargs)``, its seconds added to this add's ``stage`` (:data:`STAGES`)."""
+        start = time.perf_counter()
+        try:
+            return fn(*args, **kwargs)
+        finally:
+            self._stages[stage] += time.perf_counter() - start
 
     def _search_jointly(self, slipped: set) -> None:
         """Step 5: while no pose found fits every touch kept, search again from one of them, scoring
@@ -174,7 +189,8 @@ class Session:
             # a search that stopped at a pose the other touches rule out may reach the truth from
             # another touch, whose places rank by other curvatures
             context = [c for i in use if i != start for c in self.world[i].curves]
-            found = self.recognizer.recognize(self.world[start], context=context, among=among, fit=fit)
+            found = self._timed("context", self.recognizer.recognize, self.world[start], context=context,
+                                among=among, fit=fit)
             self.searches.append(found)
             self.result = self._joint_fit(found)
 
@@ -327,6 +343,9 @@ class Session:
 
     def _joint_fit(self, fresh=None) -> SessionResult:
         """Steps 2-4 and 6, after the search ``fresh`` of step 5 (None: after the touch's own)."""
+        return self._timed("joint", self._joint_fit_untimed, fresh)
+
+    def _joint_fit_untimed(self, fresh=None) -> SessionResult:
         n = len(self.features)
         every = np.ones(n, dtype=bool)
         found = self._fit_models(every, fresh)

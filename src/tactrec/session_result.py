@@ -70,7 +70,9 @@ class SessionResult:
 
     ``ranking`` holds the models with a joint pose, by error over the touches not slipped;
     ``probabilities`` are theirs (sum 1); ``slipped`` the touches no model's pose fits;
-    ``estimate`` the latest touch's contact, normal and curvatures in the world frame.
+    ``estimate`` the latest touch's contact, normal and curvatures in the world frame; ``stages``
+    the add's ``seconds`` by part (:data:`tactrec.session.STAGES`: the touch's own search, the
+    joint fits, the searches with the other touches in the score, the pair search).
     """
 
     ranking: list
@@ -80,6 +82,7 @@ class SessionResult:
     rejected: dict
     seconds: float
     estimate: object = None
+    stages: dict = dataclasses.field(default_factory=dict)
 
     @property
     def best(self) -> str | None:
