@@ -12,6 +12,7 @@ from tactrec.cli import main
 from tactrec.errors import InputError
 from tactrec.io.session import SessionTouch, load_session, save_session
 from tactrec.recognition import Recognizer
+from tactrec.session import STAGES
 from tactrec.simulation import random_rigid_motion, sensor_to_world, simulate_random_touch, simulate_world_touch
 
 NOISY = dict(points=41, spacing=0.3, angle=60.0, noise=0.03, noise_kind="gaussian", outward=False)
@@ -250,7 +251,7 @@ def test_a_sessions_fits_are_the_same_in_worker_processes():
 
     hard = dict(points=41, spacing=0.3, angle=30.0, noise=0.05, noise_kind="gaussian", outward=False)
     scans = build_entries(["banana", "mug", "pear", "hammer"])
-    runs, searched = {}, []
+    runs, searched, stages = {}, [], []
     for workers in (1, 2):
         with Recognizer(scans.entries, workers=workers, budget=20_000) as recognizer:
             out = []
@@ -262,11 +263,18 @@ def test_a_sessions_fits_are_the_same_in_worker_processes():
                     touch = simulate_random_touch(entry.model, rng=instance_rng(32, k, j, i), **hard)
                     result = session.add(touch, sensor_to_world(touch, pose))
                     searched.append(len(session.searches) - 1)
+                    stages.append((result.stages, result.seconds, len(session.searches) - 1))
                     out.append((result.best, result.slipped, result.probabilities,
                                 [(h.model, h.error, h.rotation.tobytes(), h.per_touch.tobytes()) for h in result.ranking]))
             runs[workers] = out
     assert runs[1] == runs[2]
     assert max(searched) >= 1, "no add searched with the other touches in the score: a fit after one is not compared"
+    # each add's seconds by stage: the parts add up to no more than the whole, the own search always
+    # runs, and a stage of step 5 has seconds exactly when the add ran a search of it
+    for parts, seconds, extra in stages:
+        assert set(parts) == set(STAGES) and parts["own"] > 0.0 and parts["joint"] > 0.0
+        assert sum(parts.values()) <= seconds * (1 + 1e-9)
+        assert (parts["context"] + parts["pairs"] > 0.0) == (extra > 0)
 
 
 def test_multi_touch_summary_reports_the_add_cost_per_session_size():
@@ -291,6 +299,28 @@ def test_multi_touch_summary_reports_the_add_cost_per_session_size():
     assert s["random"]["add_over_own_by_touches"][0]["adds"] == 2
     assert s["next"]["per_touches"][0]["accuracy_percent"] == pytest.approx(50.0)
     assert s["next"]["mean_touches_to_0.99"] == pytest.approx(2.5)
+    parts = s["random"]["add_stages"]                       # no stages recorded: nothing counted
+    assert all(parts[k]["adds"] == 0 and parts[k]["over_own_median"] is None for k in STAGES)
+
+
+def test_multi_touch_summary_says_where_the_adds_time_goes():
+    """The stage breakdown: per stage, the adds that ran it, its share of all adds' seconds and its
+    seconds over the touch's own search (median over those adds); the first touches are not adds."""
+    from tactrec.bench.multi_touch import summary
+
+    def step(seconds, own, context=0.0, pairs=0.0):
+        return {"best": "a", "correct": True, "confidence": 1.0, "seconds": seconds, "own_seconds": own,
+                "slipped": [], "stages": {"own": own, "joint": 0.5, "context": context, "pairs": pairs}}
+
+    first = step(100.0, 99.0)
+    rows = [{"random": [first, step(2.0, 1.0), step(4.0, 1.0, context=2.0)],
+             "next": [first, step(10.0, 1.0, context=3.0, pairs=5.0)]}]
+    parts = summary(rows)["random"]["add_stages"]
+    assert [parts[k]["adds"] for k in STAGES] == [2, 2, 1, 0]
+    assert parts["own"]["share"] == pytest.approx(2.0 / 6.0) and parts["context"]["share"] == pytest.approx(2.0 / 6.0)
+    assert parts["own"]["over_own_median"] == pytest.approx(1.0) and parts["context"]["over_own_median"] == 2.0
+    assert parts["pairs"]["share"] == 0.0 and parts["pairs"]["over_own_median"] is None
+    assert summary(rows)["next"]["add_stages"]["pairs"]["over_own_median"] == pytest.approx(5.0)
 
 
 def test_multi_touch_tells_a_found_true_pose_from_a_missed_one(small):

@@ -35,7 +35,10 @@ touch's recognition, two ways: against the first touches' (same run;
 medians), and against the added touch's own recognition, which every add runs
 first (the ratio per add; median, p95, max).  The first touches are the
 protocol's and often settle early, while later touches land anywhere on a
-face, so the first comparison mixes in how hard the touches are.
+face, so the first comparison mixes in how hard the touches are.  Where
+an add's time goes is reported by stage (:data:`tactrec.session.STAGES`):
+how many adds ran each, its share of the adds' seconds, and its seconds over
+the touch's own search.
 Plots: accuracy against touches, and the reliability of the confidence.
 """
 
@@ -49,6 +52,7 @@ import numpy as np
 
 from ..features import Touch
 from ..io.atomic import write_text_atomic
+from ..session import STAGES
 from ..session_fit import per_touch
 from ..simulation import random_rigid_motion, sensor_to_world, simulate_world_touch
 from ..surfaces import BUILTIN_SETS
@@ -163,7 +167,7 @@ def _session(task) -> dict:
             seconds = time.perf_counter() - start
             steps.append({"best": result.best, "correct": result.best == entry.name,
                           "confidence": result.confidence, "seconds": seconds, "slipped": list(result.slipped),
-                          "own_seconds": session.solo[-1].seconds,
+                          "own_seconds": session.solo[-1].seconds, "stages": dict(result.stages),
                           "truth_found": _truth_found(session, entry, world2model)})
             if len(steps) >= TOUCHES:
                 break
@@ -199,6 +203,21 @@ def _over_own(step: dict) -> float | None:
     return step["seconds"] / step["own_seconds"] if step.get("own_seconds") else None
 
 
+def _stages(adds: list[dict]) -> dict:
+    """Where the adds' time goes, per stage of :data:`tactrec.session.STAGES`: how many adds ran it,
+    its share of all the adds' seconds, and its seconds over the added touch's own search (median
+    over the adds that ran it)."""
+    adds = [a for a in adds if a.get("stages") and a.get("own_seconds")]
+    total = sum(a["seconds"] for a in adds)
+    out = {}
+    for stage in STAGES:
+        ran = [a for a in adds if a["stages"].get(stage, 0.0) > 0.0]
+        out[stage] = {"adds": len(ran), "share": sum(a["stages"][stage] for a in ran) / total if total else None,
+                      "over_own_median": float(np.median([a["stages"][stage] / a["own_seconds"] for a in ran]))
+                      if ran else None}
+    return out
+
+
 def summary(rows: list[dict]) -> dict:
     out = {}
     first = [r["next"][0]["seconds"] for r in rows] + [r["random"][0]["seconds"] for r in rows]
@@ -228,7 +247,8 @@ def summary(rows: list[dict]) -> dict:
                          "add_ratio_of_medians": float(np.median(adds) / np.median(first)) if adds else None,
                          "add_over_own": _quantiles(own), "add_over_own_by_touches": by_n,
                          "propose_seconds": _quantiles([s["propose_seconds"] for r in rows for s in r[strategy]
-                                                        if "propose_seconds" in s])}
+                                                        if "propose_seconds" in s]),
+                         "add_stages": _stages([s for r in rows for s in r[strategy][1:]])}
     out["first_touch_seconds"] = _quantiles(first)
     out["sessions"] = len(rows)
     return out
@@ -313,6 +333,18 @@ def run(*, out, instances: int = 10, seed: int = 0, jobs: int | None = None, qui
             cells = ["-" if b["median"] is None else f"{b['median']:.2f} ({b['adds']})"
                      for b in s[strategy]["add_over_own_by_touches"]]
             lines.append(f"| {name} | {strategy} | " + " | ".join(cells) + " |")
+    lines += ["", "Where the adds' time goes: per stage of an add, the adds that ran it, its share of the adds' "
+              "seconds, and its seconds over the added touch's own search (median over the adds that ran it).", "",
+              "| set | strategy | adds | " + " | ".join(STAGES) + " |", "|---|---|---|" + "---|" * len(STAGES)]
+    for name, s in table["summary"].items():
+        for strategy in STRATEGIES:
+            st = s[strategy]["add_stages"]
+            adds = sum(b["adds"] for b in s[strategy]["add_over_own_by_touches"])
+            cells = ["-" if st[k]["share"] is None else
+                     f"{st[k]['adds']}, {100 * st[k]['share']:.0f}%, "
+                     + ("-" if st[k]["over_own_median"] is None else f"{st[k]['over_own_median']:.2f}")
+                     for k in STAGES]
+            lines.append(f"| {name} | {strategy} | {adds} | " + " | ".join(cells) + " |")
     lines += ["", "Sessions whose pose of the true model fits the touches as well as the true pose does, after "
               "each touch count (a wrong answer with the true pose found is the data's, not the searches').", "",
               "| set | strategy | " + " | ".join(str(k) for k in range(1, TOUCHES + 1)) + " |",
