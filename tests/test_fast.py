@@ -303,6 +303,26 @@ def test_a_search_with_other_touches_in_its_score_tries_the_poses_the_budget_all
     assert np.median(ratios) <= 0.5
 
 
+def test_the_first_screen_scores_a_context_on_one_point_a_curve():
+    """The points every hypothesis is first scored on: the touch's own ``per_curve`` a curve, as
+    without a context, and then each context curve's middle point (in the copy's units), so that
+    the screen's cost does not grow with the touches in the context; the poses it keeps are scored
+    on the context in full (``joint_subset``)."""
+    from tactrec.features import Touch
+
+    model = load_model("ellipsoid")
+    touch = Touch.from_data(simulate_random_touch(model, rng=3, points=31, spacing=0.02))
+    others = [c for k in (4, 5) for c in simulate_random_touch(model, rng=k, points=21 + 10 * k, spacing=0.02).curves]
+    assert np.array_equal(touch.screen_subset(5), touch.subset(5))
+    joint = touch.with_context(others).in_units(2.0)
+    x = joint.screen_subset(5)
+    assert x.shape == (15 + len(others), 3)
+    assert np.allclose(x[:15], joint.subset(5))
+    assert np.allclose(x[15:], [2.0 * np.asarray(c)[len(c) // 2] for c in others])
+    assert len(joint.joint_subset(5)) == 5 * (3 + len(others))
+    assert touch.with_context(others, fit=0.3).in_units(2.0).fit == 0.3       # the caller's fit, kept
+
+
 def test_a_search_among_chosen_models_searches_those_alone_and_stops_at_its_callers_fit(scans):
     """``among`` restricts a search to the named models (the others are rejected as not searched,
     an unknown name is one InputError), and with a context the caller's ``fit`` decides when it

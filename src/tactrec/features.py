@@ -93,6 +93,14 @@ class Touch:
         """:func:`subset` of the joint curves."""
         return subset(self.joint_curves, per_curve)
 
+    def screen_subset(self, per_curve: int) -> np.ndarray:
+        """The points a search's first screen scores every pose on: ``per_curve`` of each of this
+        touch's curves (:func:`subset`) and the middle point of each context curve, this copy's
+        units.  The screen then costs about what the touch alone costs, however many touches the
+        context holds; the poses it keeps are scored on :meth:`joint_subset`."""
+        middles = [np.asarray(c, dtype=np.float64)[len(c) // 2][None] * self.scale for c in self.context]
+        return np.concatenate([self.subset(per_curve), *middles])
+
     def with_context(self, curves, *, fit: float = 0.0) -> "Touch":
         """The same touch, its poses scored also on ``curves`` (other touches, same frame, data units);
         ``fit``: the joint mean distance that counts as a fit of them all (see :attr:`fit`)."""
@@ -152,4 +160,4 @@ class Touch:
         """The same touch with coordinates multiplied by ``scale`` (data to model units)."""
         if scale == self.scale:
             return self
-        return Touch(self.data, self.estimate, float(scale), self.noise, self.context)
+        return Touch(self.data, self.estimate, float(scale), self.noise, self.context, self.fit)

@@ -45,8 +45,11 @@ touch and a joint refinement (more searches only in step 5):
    best error beyond ``fit_limit`` and three standard errors), its errors
    rule nothing out and every model whose pose does not fit every touch is
    covered.  Each search may try as many poses per model as the touch's own
-   search, each scored on every touch, and it stops once its best pose fits
-   the touches as well as their own searches fit each (the points-weighted
+   search, each scored on every touch (the first screen, which every pose
+   takes, on one point of each other curve: about the cost of the touch's
+   own screen, :meth:`tactrec.features.Touch.screen_subset`), and it stops
+   once its best pose fits the touches as well as their own searches fit
+   each (the points-weighted
    mean of each touch's best fit on any model, or of ``fit_limit``,
    whichever is larger): the joint form of the single search's rule, with
    no allowance above it, since a search that stops at a pose a little off

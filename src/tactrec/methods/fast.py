@@ -12,8 +12,10 @@ crease, where the estimated normal is off).  A tier on a set of models is
    posed from frames (:func:`tactrec.registration.mesh_fast.frame_poses`) and
    take ``cheap_steps`` Gauss-Newton steps on exact distances from
    ``coarse_points`` points a curve (after the first, only the best eighth,
-   at least ``screen``, go on); each place keeps its best rotation and the
-   model its best ``refine`` poses;
+   at least ``screen``, go on; with a context, the first step, which every
+   hypothesis takes, scores the context on one point a curve, its middle:
+   :meth:`tactrec.features.Touch.screen_subset`); each place keeps its best
+   rotation and the model its best ``refine`` poses;
 2. *selection* (across models): a pose is refined when its cheap score lies
    within ``ratio`` x the best error so far (or the tier's best cheap score);
    the others are deferred, not dropped;
@@ -41,7 +43,8 @@ twice as much without an ``outward`` hint; a caller may give a lower one in
 all).  A round's cost is counted on the touch's own curves, so the budget
 bounds the poses tried: a search with other touches in its score (a
 session's) tries as many as the touch alone would and spends queries in
-proportion to the points it scores.  The best ``polish`` models then take
+proportion to the points it scores (on the first screen, about what the
+touch alone spends).  The best ``polish`` models then take
 ``polish_iterations`` more steps on all points.
 
 Every cut in a ranked list (screen, rotations, refinement) orders near-equal

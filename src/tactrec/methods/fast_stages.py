@@ -55,7 +55,7 @@ def _cheap(held, indices, touch, config: FastConfig, k: int) -> list[dict]:
         if t.radius > model.size or t.joint_reach > model.size:
             out.append({"rejected": "the touch is larger than the model", "queries": 0})
             continue
-        x = t.joint_subset(config.coarse_points)
+        x, screened = t.joint_subset(config.coarse_points), t.screen_subset(config.coarse_points)
         poses, queries, tried = [], 0, 0
         for sign, g in zip((1, -1), t.orientations):
             chosen, fit = _places(held, index, t, sign, config, tier.places is None)
@@ -68,7 +68,7 @@ def _cheap(held, indices, touch, config: FastConfig, k: int) -> list[dict]:
                 steps = config.cheap_steps
                 kept = max(config.screen, len(R) // 8)
                 if tier.places is not None and len(R) > kept and steps > 1:
-                    R, tr, first, q = mesh_fast.refine(model, R, tr, x, iterations=1, predict=True)
+                    R, tr, first, q = mesh_fast.refine(model, R, tr, screened, iterations=1, predict=True)
                     keep = stable_order(first)[:kept]
                     R, tr, owner, steps, queries = R[keep], tr[keep], owner[keep], steps - 1, queries + q
                 R, tr, score, q = mesh_fast.refine(model, R, tr, x, iterations=steps, predict=True,
