@@ -98,8 +98,8 @@ class Touch:
         touch's curves (:func:`subset`) and the middle point of each context curve, this copy's
         units.  The screen then costs about what the touch alone costs, however many touches the
         context holds; the poses it keeps are scored on :meth:`joint_subset`."""
-        middles = [np.asarray(c, dtype=np.float64)[len(c) // 2][None] * self.scale for c in self.context]
-        return np.concatenate([self.subset(per_curve), *middles])
+        context = self.joint_curves[len(self.curves):]
+        return np.concatenate([self.subset(per_curve), *(c[len(c) // 2][None] for c in context)])
 
     def with_context(self, curves, *, fit: float = 0.0) -> "Touch":
         """The same touch, its poses scored also on ``curves`` (other touches, same frame, data units);
@@ -160,4 +160,4 @@ class Touch:
         """The same touch with coordinates multiplied by ``scale`` (data to model units)."""
         if scale == self.scale:
             return self
-        return Touch(self.data, self.estimate, float(scale), self.noise, self.context, self.fit)
+        return dataclasses.replace(self, scale=float(scale))          # every other field kept, nothing cached

@@ -49,11 +49,10 @@ touch and a joint refinement (more searches only in step 5):
    takes, on one point of each other curve: about the cost of the touch's
    own screen, :meth:`tactrec.features.Touch.screen_subset`), and it stops
    once its best pose fits the touches as well as their own searches fit
-   each (the points-weighted
-   mean of each touch's best fit on any model, or of ``fit_limit``,
-   whichever is larger): the joint form of the single search's rule, with
-   no allowance above it, since a search that stops at a pose a little off
-   hands the lead to another model.  Then, when the best model's joint pose
+   each (the points-weighted mean of each touch's best fit on any model, or
+   of ``fit_limit``, whichever is larger): the joint form of the single
+   search's rule, with no allowance above it, since a search that stops at
+   a pose a little off hands the lead to another model.  Then, when the best model's joint pose
    is still not a fit under the touches' noise (its mean distance beyond
    three standard errors of the points-weighted mean of their
    :func:`~tactrec.probability.fit_limit`), the *pair search*
