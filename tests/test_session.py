@@ -151,6 +151,32 @@ def test_session_files_round_trip_and_bad_ones_are_one_line(tmp_path, capsys):
         load_session(tmp_path / "missing.json")
 
 
+def test_a_touch_the_estimator_refuses_leaves_the_session_as_it_was():
+    """A second touch whose curves are one curve three times (tangent at the contact) raises one
+    InputError and changes nothing: the session keeps one touch and its result, and a good second
+    touch is then added as if the bad one had never come."""
+    import dataclasses
+
+    from tactrec.database import build_entries
+
+    db = build_entries(["ellipsoid", "sphere-33"])
+    touches = [simulate_random_touch(db.entries[0].model, rng=instance_rng(40, i), **NOISY) for i in range(2)]
+    bad = dataclasses.replace(touches[1], curves=(touches[1].curves[0],) * 3)
+    runs = []
+    for with_bad in (False, True):
+        with Recognizer(db.entries) as recognizer:
+            session = recognizer.session()
+            first = session.add(touches[0])
+            if with_bad:
+                with pytest.raises(InputError, match="tangent"):
+                    session.add(bad)
+                assert len(session.features) == len(session.world) == len(session.solo) == 1
+                assert session.result is first
+            result = session.add(touches[1])
+            runs.append((result.best, result.probabilities, [h.per_touch.tobytes() for h in result.ranking]))
+    assert runs[0] == runs[1]
+
+
 def test_recognize_and_next_on_a_session_file(tmp_path, capsys):
     """The command line on a two-touch session of the ellipsoid among the closed-form surfaces: one
     result with ``touches`` 2, a single touch's keys (contact, curvatures, each entry's location),

@@ -21,10 +21,10 @@ that touch and a joint refinement (more searches only in step 5):
    after a search of step 5 only from its fit and that search's poses;
 3. a touch is *consistent* with a pose when its mean distance under it is
    within three standard errors of its own fit on that model (when it was
-   searched on its own), or of the largest mean distance still a fit (:func:`tactrec.probability.fit_limit`:
-   a perfect fit's under its noise, or the method's ``floor`` x its radius on
-   noise-free data), whichever is larger: the noise of that touch decides,
-   not a fixed tolerance;
+   searched on its own), or of the largest mean distance still a fit
+   (:func:`tactrec.probability.fit_limit`: a perfect fit's under its noise,
+   or the method's ``floor`` x its radius on noise-free data), whichever is
+   larger: the noise of that touch decides, not a fixed tolerance;
 4. a touch that no pose fitting most touches fits is reported as *slipped*
    (the contact moved, or the object did) and left out of every fit and
    probability, never averaged in;
@@ -33,39 +33,39 @@ that touch and a joint refinement (more searches only in step 5):
    included: a pose the earlier searches missed can make a good touch look
    slipped), the new touch is searched with the earlier touches' points in
    the score (:meth:`tactrec.recognition.Recognizer.recognize` with
-   ``context``), and steps 2-4 run again on its poses; if still no pose
-   fits them all, the touch kept before it is searched the same way with
-   the others as its context (:data:`STARTS`): a touch may be searched
-   with the others in its score when it is added and again when the next
-   one is.  A search ranks a touch's places by curvature, and on a short
-   noisy touch the true place can rank beyond its schedule; another touch's
-   places rank by other curvatures.  A touch's search is not repeated from
-   every earlier touch: each such search scores all the touches, and the
-   cost of an add would grow with the square of their number.  Those
-   searches cover the models whose pose does not fit every touch: one whose
-   pose fits them all needs no other.  Once the new touch has been searched
-   on its own, only those it fits on its own (its own search's error within
-   three standard errors of its best model's, or of ``fit_limit``): a model
-   the touch does not fit cannot fit it jointly; unless its own search
-   fitted no model (its best error beyond ``fit_limit`` and three standard
-   errors), whose errors rule nothing out.  Each search may try as many poses per model as the touch's own
-   search, each scored on every touch (the first screen, which every pose
-   takes, on one point of each other curve: about the cost of the touch's
-   own screen, :meth:`tactrec.features.Touch.screen_subset`), and it stops
-   once its best pose fits the touches as well as their own searches fit
-   each (the points-weighted mean of each touch's best fit on any model, or
-   of ``fit_limit``, whichever is larger): the joint form of the single
-   search's rule, with no allowance above it, since a search that stops at
-   a pose a little off hands the lead to another model.  Then, when the best model's joint pose
-   is still not a fit under the touches' noise (its mean distance beyond
-   three standard errors of the points-weighted mean of their
-   :func:`~tactrec.probability.fit_limit`), the *pair search*
+   ``context``), and steps 2-4 run again on its poses; if still no pose fits
+   them all, the touch kept before it is searched the same way with the
+   others as its context (:data:`STARTS`): a touch may be searched with the
+   others in its score when it is added and again when the next one is.  A
+   search ranks a touch's places by curvature, and on a short noisy touch
+   the true place can rank beyond its schedule; another touch's places rank
+   by other curvatures.  A touch's search is not repeated from every earlier
+   touch: each such search scores all the touches, and the cost of an add
+   would grow with the square of their number.  Those searches cover the
+   models whose pose does not fit every touch: one whose pose fits them all
+   needs no other.  Once the new touch has been searched on its own, only
+   those it fits on its own (its own search's error within three standard
+   errors of its best model's, or of ``fit_limit``): a model the touch does
+   not fit cannot fit it jointly; unless its own search fitted no model (its
+   best error beyond ``fit_limit`` and three standard errors), whose errors
+   rule nothing out.  Each search may try as many poses per model as the
+   touch's own search, each scored on every touch (the first screen, which
+   every pose takes, on one point of each other curve: about the cost of the
+   touch's own screen, :meth:`tactrec.features.Touch.screen_subset`), and it
+   stops once its best pose fits the touches as well as their own searches
+   fit each (the points-weighted mean of each touch's best fit on any model,
+   or of ``fit_limit``, whichever is larger): the joint form of the single
+   search's rule, with no allowance above it, since a search that stops at a
+   pose a little off hands the lead to another model.  Then, when the best
+   model's joint pose is still not a fit under the touches' noise (its mean
+   distance beyond three standard errors of the points-weighted mean of
+   their :func:`~tactrec.probability.fit_limit`), the *pair search*
    (:mod:`tactrec.session_pairs`) poses every model from the new touch and
    the kept touch farthest from it, over every place of the model and with
-   no curvature ranking, and steps 2-4 run again on its poses.  The
-   searches with the other touches in the score come first: each is
-   bounded by a touch's own budget, while the pair search costs several
-   times a touch's own search;
+   no curvature ranking, and steps 2-4 run again on its poses.  The searches
+   with the other touches in the score come first: each is bounded by a
+   touch's own budget, while the pair search costs several times a touch's
+   own search;
 6. the probabilities (:mod:`tactrec.probability`) come from every model's
    distances to the points of all touches kept, under its joint pose.
 """
@@ -145,6 +145,7 @@ class Session:
             raise InputError(f"this touch is in {data.units!r}, the session in {self.touches[0].data.units!r}",
                              data.source)
         world = touch.in_world()
+        feature = self.recognizer.touch(world)          # bad data is refused before the session changes
         slipped = set(self.result.slipped) if self.result is not None else set()
         earlier = self.joint_search and any(i not in slipped for i in range(len(self.world)))
         self._stages = dict.fromkeys(STAGES, 0.0)
@@ -152,7 +153,7 @@ class Session:
         self.world.append(world)
         self.solo.append(None)
         self.searches = []
-        self.features.append(self.recognizer.touch(world))
+        self.features.append(feature)
         self._fits = {}
         if earlier and self.recognizer.method.scores_context:
             session_search.run(self, slipped)
