@@ -75,8 +75,8 @@ SPACING = 0.3
 
 def _code_hash() -> str:
     return sources_hash(*CORE_SOURCES, "session.py", "session_fit.py", "session_pairs.py", "session_result.py",
-                        "session_search.py", "session_family.py", "proposal.py", "probability.py", "bench/multi_touch.py", "bench/fast_vs_paper.py",
-                        "bench/scale.py")
+                        "session_search.py", "session_family.py", "proposal.py", "probability.py",
+                        "bench/multi_touch.py", "bench/fast_vs_paper.py", "bench/scale.py")
 
 
 def _first(kind: str, m_index: int, instance: int, seed: int):
