@@ -243,6 +243,7 @@ def test_a_new_touch_whose_own_search_fitted_nothing_rules_no_model_out(small):
     searched, the ones its own errors ruled out included."""
     import dataclasses
 
+    from tactrec.probability import fit_limit
     from tactrec.session_search import unexplained
 
     entry = small[0]
@@ -260,6 +261,11 @@ def test_a_new_touch_whose_own_search_fitted_nothing_rules_no_model_out(small):
     session.solo[-1] = None
     never = set(unexplained(session, slipped))
     assert never == {e.name for e in small if failing(e.name)}
+    # unsearched alone, the touch's own fit stands in at its fit limit times the first touch's ratio
+    limits = [fit_limit(f, session._floor) for f in session.features]
+    stand_in = session._own_fits()
+    assert stand_in[-1] == pytest.approx(limits[-1] * stand_in[0] / limits[0], rel=1e-12)
+    assert stand_in[0] >= limits[0]
     session.solo[-1] = own
     limit = session._limits()[-1]
     searched = set(unexplained(session, slipped))

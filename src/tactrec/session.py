@@ -21,7 +21,8 @@ that touch and a joint refinement (more searches only in step 5):
    after a search of step 5 only from its fit and that search's poses;
 3. a touch is *consistent* with a pose when its mean distance under it is
    within three standard errors of its own fit on that model (when it was
-   searched on its own), or of the largest mean distance still a fit
+   never searched on its own, of the fit it stands in at,
+   :meth:`Session._own_fits`), or of the largest mean distance still a fit
    (:func:`tactrec.probability.fit_limit`: a perfect fit's under its noise,
    or the method's ``floor`` x its radius on noise-free data), whichever is
    larger: the noise of that touch decides, not a fixed tolerance;
@@ -210,9 +211,17 @@ class Session:
 
     def _own_fits(self) -> np.ndarray:
         """Per touch ``(N,)``, data units: the fit its own search reached on its best model, or
-        :func:`fit_limit`, whichever is larger (``fit_limit`` for a touch never searched on its own)."""
-        return np.array([max(0.0 if rec is None else min([r.error / r.scale for r in rec.ranking if r.ok], default=0.0),
-                             fit_limit(f, self._floor)) for f, rec in zip(self.features, self.solo)])
+        :func:`fit_limit`, whichever is larger.  A touch never searched on its own stands in at its
+        ``fit_limit`` times the median ratio of the two over the touches that were: how near this
+        object's models let a touch's fit come to what its noise allows (the first touch is always
+        searched on its own)."""
+        limits = np.array([fit_limit(f, self._floor) for f in self.features])
+        own = np.array([np.nan if rec is None else min([r.error / r.scale for r in rec.ranking if r.ok], default=0.0)
+                        for rec in self.solo])
+        alone = ~np.isnan(own)
+        own[alone] = np.maximum(own[alone], limits[alone])
+        ratio = float(np.median(own[alone] / limits[alone])) if alone.any() else 1.0
+        return np.where(alone, own, ratio * limits)
 
     def _limits(self) -> np.ndarray:
         """Per touch ``(N,)``, data units: the largest mean distance of a fit as good as its own search
@@ -248,8 +257,11 @@ class Session:
         """Which touches are consistent (module text, step 3) with poses of model ``name`` whose
         per-touch mean distances (data units) are ``per_touch (h, N)``: ``(h, N)`` bool."""
         allowed = []
-        for f, rec in zip(self.features, self.solo):
-            r = None if rec is None else next((r for r in rec.ranking if r.model == name and r.ok), None)
+        for f, rec, stand_in in zip(self.features, self.solo, self._own_fits()):
+            if rec is None:                 # never searched on its own: the fit it stands in at
+                allowed.append(_allowed(stand_in, len(f.points)))
+                continue
+            r = next((r for r in rec.ranking if r.model == name and r.ok), None)
             allowed.append(_allowed(max(0.0 if r is None else r.error / r.scale, fit_limit(f, self._floor)),
                                     len(f.points)))
         return per_touch <= np.array(allowed)[None]

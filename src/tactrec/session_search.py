@@ -16,16 +16,20 @@ of a search's cost).
   touch the true place can rank beyond the budget: the search then runs its
   whole budget and finds nothing.  The search with the context ranks the
   same places but scores each pose on every touch and stops once one fits
-  them all.  When it finds one, the touch is never searched alone: its
-  allowance in the slip test (step 3) is :func:`tactrec.probability.fit_limit`,
-  what its noise allows a perfect fit.  When it does not, the touch is
+  them all.  When it finds one, the touch is never searched alone.  When it
+  does not, the touch is
   searched alone, and then the touch kept before it is searched with the
   others as its context (:data:`STARTS`).
 
-A search alone's poses can change which touches a cached fit counts as
-consistent (a model's allowance for the touch is its own fit on that model,
-when larger than ``fit_limit``): the cached fits are reassessed when it
-arrives.
+Until it is searched alone (if ever), the touch's own fit, which its
+allowance in the slip test (step 3) and the searches' stopping fit build on,
+stands in at its :func:`tactrec.probability.fit_limit` (what its noise allows
+a perfect fit) times how far above theirs the touches searched alone fitted
+(the median ratio; :meth:`tactrec.session.Session._own_fits`): a scan's
+facets keep the true pose's fit above the noise's, alike for every touch of
+the object.  A search alone's poses then change which touches a cached fit
+counts as consistent (a model's allowance for the touch becomes its own fit
+on that model): the cached fits are reassessed when it arrives.
 """
 
 from __future__ import annotations
