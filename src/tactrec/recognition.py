@@ -280,10 +280,6 @@ class Recognizer:
 
         return Session(self)
 
-    def touch(self, data: TactileData) -> Touch:
-        """The touch's local geometry and points as this recognizer's searches see them (no search)."""
-        return Touch.from_data(data, **self.estimation)
-
     def recognize(self, data: TactileData, *, context=(), among=None, fit: float = 0.0,
                   budget: int | None = None) -> Recognition:
         """Recognise one touch (Section 3.3).  ``context``: curves of other touches of the same object
@@ -294,7 +290,7 @@ class Recognizer:
         searched.  ``budget``: the most work (closest-point queries) the search may spend in all, when
         lower than the method's own budget; the first round runs whatever it costs."""
         start = time.perf_counter()
-        touch = self.touch(data)
+        touch = Touch.from_data(data, **self.estimation)
         if len(context):
             touch = touch.with_context(context, fit=fit)
         chosen = None

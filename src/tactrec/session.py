@@ -1,17 +1,12 @@
 """Several touches of one still object: one pose per model that fits them all.
 
 A :class:`Session` keeps the touches of one object in a common *world*
-frame.  Adding a touch (:meth:`Session.add`) costs about one recognition of
-that touch and a joint refinement (more searches only in step 5):
+frame.  Adding a touch (:meth:`Session.add`) costs one recognition of that
+touch and a joint refinement (more searches only in step 5):
 
 1. the touch, moved into the world frame by its ``sensor2world`` pose, is
-   scored under the session's poses so far; when the best model's pose fits
-   every touch (step 3), the touch is recognised on its own by the
-   recognizer's method (each accepted model's registration is then a
-   world-to-model pose); when not, step 5 comes first and the touch is
-   recognised on its own only if step 5's first search finds no pose that
-   fits them all (:mod:`tactrec.session_search`).  The first touch is
-   recognised on its own;
+   recognised on its own by the recognizer's method; each accepted model's
+   registration is then a world-to-model pose;
 2. for every model, the candidate poses are its joint pose so far (with the
    poses along its free motions, where they were computed) and the new
    touch's poses on it (the best and the others its search refined); each is
@@ -20,53 +15,53 @@ that touch and a joint refinement (more searches only in step 5):
    :mod:`tactrec.session_fit`, in the recognizer's worker processes); within one add, a model is fitted again
    after a search of step 5 only from its fit and that search's poses;
 3. a touch is *consistent* with a pose when its mean distance under it is
-   within three standard errors of its own fit on that model (when it was
-   never searched on its own, of the fit it stands in at,
-   :meth:`Session._own_fits`), or of the largest mean distance still a fit
-   (:func:`tactrec.probability.fit_limit`: a perfect fit's under its noise,
-   or the method's ``floor`` x its radius on noise-free data), whichever is
-   larger: the noise of that touch decides, not a fixed tolerance;
+   within three standard errors of its own fit on that model, or of the
+   largest mean distance still a fit (:func:`tactrec.probability.fit_limit`:
+   a perfect fit's under its noise, or the method's ``floor`` x its radius on
+   noise-free data), whichever is larger: the noise of that touch decides,
+   not a fixed tolerance;
 4. a touch that no pose fitting most touches fits is reported as *slipped*
    (the contact moved, or the object did) and left out of every fit and
    probability, never averaged in;
 5. when the best model's pose is not consistent with every touch not set
    aside before this one (the new touch and any step 4 now calls slipped
    included: a pose the earlier searches missed can make a good touch look
-   slipped), the new touch is searched with the earlier touches' points in
-   the score (:meth:`tactrec.recognition.Recognizer.recognize` with
-   ``context``), and steps 2-4 run again on its poses; if still no pose fits
-   them all, the touch kept before it is searched the same way with the
-   others as its context (:data:`STARTS`): a touch may be searched with the
-   others in its score when it is added and again when the next one is.  A
-   search ranks a touch's places by curvature, and on a short noisy touch
-   the true place can rank beyond its schedule; another touch's places rank
-   by other curvatures.  A touch's search is not repeated from every earlier
-   touch: each such search scores all the touches, and the cost of an add
-   would grow with the square of their number.  Those searches cover the
-   models whose pose does not fit every touch: one whose pose fits them all
-   needs no other.  Once the new touch has been searched on its own, only
-   those it fits on its own (its own search's error within three standard
-   errors of its best model's, or of ``fit_limit``): a model the touch does
-   not fit cannot fit it jointly; unless its own search fitted no model (its
-   best error beyond ``fit_limit`` and three standard errors), whose errors
-   rule nothing out.  Each search may try as many poses per model as the
-   touch's own search, each scored on every touch (the first screen, which
-   every pose takes, on one point of each other curve: about the cost of the
-   touch's own screen, :meth:`tactrec.features.Touch.screen_subset`), and it
-   stops once its best pose fits the touches as well as their own searches
-   fit each (the points-weighted mean of each touch's best fit on any model,
-   or of ``fit_limit``, whichever is larger): the joint form of the single
-   search's rule, with no allowance above it, since a search that stops at a
-   pose a little off hands the lead to another model.  Then, when the best
-   model's joint pose is still not a fit under the touches' noise (its mean
-   distance beyond three standard errors of the points-weighted mean of
-   their :func:`~tactrec.probability.fit_limit`), the *pair search*
+   slipped), the new touch is searched again with the earlier touches'
+   points in the score (:meth:`tactrec.recognition.Recognizer.recognize`
+   with ``context``), and steps 2-4 run again on its poses; if still no pose
+   fits them all, the touch kept before it is searched the same way with
+   the others as its context (:data:`STARTS`): a touch may be searched
+   with the others in its score when it is added and again when the next
+   one is.  A search ranks a touch's places by curvature, and on a short
+   noisy touch the true place can rank beyond its schedule; another touch's
+   places rank by other curvatures.  A touch's search is not repeated from
+   every earlier touch: each such search scores all the touches, and the
+   cost of an add would grow with the square of their number.  Those
+   searches cover the models the new touch fits on its own (its own search's
+   error within three standard errors of its best model's, or of
+   ``fit_limit``) whose pose does not fit every touch: a model the touch
+   does not fit cannot fit it jointly, and one whose pose fits them all
+   needs no other.  When the new touch's own search fitted no model (its
+   best error beyond ``fit_limit`` and three standard errors), its errors
+   rule nothing out and every model whose pose does not fit every touch is
+   covered.  Each search may try as many poses per model as the touch's own
+   search, each scored on every touch (the first screen, which every pose
+   takes, on one point of each other curve: about the cost of the touch's
+   own screen, :meth:`tactrec.features.Touch.screen_subset`), and it stops
+   once its best pose fits the touches as well as their own searches fit
+   each (the points-weighted mean of each touch's best fit on any model, or
+   of ``fit_limit``, whichever is larger): the joint form of the single
+   search's rule, with no allowance above it, since a search that stops at
+   a pose a little off hands the lead to another model.  Then, when the best model's joint pose
+   is still not a fit under the touches' noise (its mean distance beyond
+   three standard errors of the points-weighted mean of their
+   :func:`~tactrec.probability.fit_limit`), the *pair search*
    (:mod:`tactrec.session_pairs`) poses every model from the new touch and
    the kept touch farthest from it, over every place of the model and with
-   no curvature ranking, and steps 2-4 run again on its poses.  The searches
-   with the other touches in the score come first: each is bounded by a
-   touch's own budget, while the pair search costs several times a touch's
-   own search;
+   no curvature ranking, and steps 2-4 run again on its poses.  The
+   searches with the other touches in the score come first: each is
+   bounded by a touch's own budget, while the pair search costs several
+   times a touch's own search;
 6. the probabilities (:mod:`tactrec.probability`) come from every model's
    distances to the points of all touches kept, under its joint pose.
 """
@@ -83,10 +78,9 @@ from .io.session import SessionTouch, rigid_pose
 from .io.touch import TactileData
 from .linalg import clearly_less
 from .probability import evidence, fit_limit, fit_standard_error, residuals
-from . import session_family, session_pairs, session_search
+from . import session_family, session_pairs
 from .session_fit import fit_stage
 from .session_result import Hypothesis, SessionResult
-from .session_search import STARTS
 
 
 __all__ = ["Session", "SessionResult", "Hypothesis", "CONSISTENT_SE", "STAGES"]
@@ -95,10 +89,12 @@ __all__ = ["Session", "SessionResult", "Hypothesis", "CONSISTENT_SE", "STAGES"]
 CONSISTENT_SE = 3.0
 #: on noise-free data a fit is within this fraction of the touch's radius, for a method without a ``floor`` of its own
 FLOOR = 1e-3
+#: step 5 searches from this many touches, newest first: the new one and the one kept before it, so a
+#: touch may be searched with the others in its score when it is added and again when the next one is
+STARTS = 2
 #: the parts of an add whose seconds :attr:`SessionResult.stages` gives: the touch's own search
 #: (step 1), the joint fits (steps 2-4 and 6, each time they run), the searches with the other
-#: touches in the score and the pair search (step 5); "own" is 0 in an add whose first search with the
-#: other touches in the score found a pose that fits them all (step 1)
+#: touches in the score and the pair search (step 5)
 STAGES = ("own", "joint", "context", "pairs")
 
 
@@ -127,7 +123,7 @@ class Session:
         self.recognizer = recognizer
         self.touches: list[SessionTouch] = []
         self.world: list[TactileData] = []
-        self.solo: list = []                   # each touch's own Recognition (world frame), None if never searched alone
+        self.solo: list = []                   # each touch's own Recognition (world frame)
         self.features: list = []
         self._joint: dict[str, Hypothesis] = {}
         self._fits: dict[bytes, dict[str, Hypothesis]] = {}   # this add's fits, per set of touches used
@@ -146,28 +142,28 @@ class Session:
             raise InputError(f"this touch is in {data.units!r}, the session in {self.touches[0].data.units!r}",
                              data.source)
         world = touch.in_world()
-        feature = self.recognizer.touch(world)          # bad data is refused before the session changes
         slipped = set(self.result.slipped) if self.result is not None else set()
-        earlier = self.joint_search and any(i not in slipped for i in range(len(self.world)))
+        earlier = any(i not in slipped for i in range(len(self.world)))
         self._stages = dict.fromkeys(STAGES, 0.0)
+        rec = self._timed("own", self.recognizer.recognize, world)
         self.touches.append(touch)
         self.world.append(world)
-        self.solo.append(None)
-        self.searches = []
-        self.features.append(feature)
+        self.solo.append(rec)
+        self.searches = [rec]
+        self.features.append(rec.touch)
         self._fits = {}
-        if earlier and self.recognizer.method.scores_context:
-            session_search.run(self, slipped)
-        else:
-            session_search.search_alone(self)
-        # the searches bounded by a touch's own budget first, the pair search over every place of
-        # every model only while no pose found fits the touches at their noise
-        if earlier and not self._fitted():
-            found = self._timed("pairs", session_pairs.search, self,
-                                [i for i in range(len(self.features)) if i not in slipped])
-            if found is not None:
-                self.searches.append(found)
-                self.result = self._joint_fit(found)
+        self.result = self._joint_fit()
+        if self.joint_search and earlier:
+            # the searches bounded by a touch's own budget first, the pair search over every place of
+            # every model only while no pose found fits the touches at their noise
+            if self.recognizer.method.scores_context:
+                self._search_jointly(slipped)
+            if not self._fitted():
+                found = self._timed("pairs", session_pairs.search, self,
+                                    [i for i in range(len(self.features)) if i not in slipped])
+                if found is not None:
+                    self.searches.append(found)
+                    self.result = self._joint_fit(found)
         self.result = dataclasses.replace(self.result, seconds=time.perf_counter() - start, stages=self._stages)
         return self.result
 
@@ -178,6 +174,27 @@ class Session:
             return fn(*args, **kwargs)
         finally:
             self._stages[stage] += time.perf_counter() - start
+
+    def _search_jointly(self, slipped: set) -> None:
+        """Step 5: while no pose found fits every touch kept, search again from one of them, scoring
+        poses on all: the new touch, then the one kept before it (:data:`STARTS`).  Each search covers
+        the models the new touch fits on its own whose pose does not fit them all, and stops once a
+        pose fits the touches as well as their own searches fit each."""
+        use = [i for i in range(len(self.features)) if i not in slipped]
+        fit = self.pooled(self._own_fits()[use], use)
+        for start in use[::-1][:STARTS]:
+            if self._explained(slipped):
+                return
+            among = self._unexplained(slipped)
+            if not among:
+                return
+            # a search that stopped at a pose the other touches rule out may reach the truth from
+            # another touch, whose places rank by other curvatures
+            context = [c for i in use if i != start for c in self.world[i].curves]
+            found = self._timed("context", self.recognizer.recognize, self.world[start], context=context,
+                                among=among, fit=fit)
+            self.searches.append(found)
+            self.result = self._joint_fit(found)
 
     def kept(self) -> list[int]:
         """The touches the session's result uses: all but those it calls slipped."""
@@ -204,6 +221,14 @@ class Session:
         limits = [fit_limit(self.features[i], self._floor) for i in use]
         return self.result.ranking[0].error <= self.allowed(self.pooled(limits, use), use)
 
+    def _explained(self, slipped: set) -> bool:
+        """Whether the best model's joint pose is consistent with every touch but those ``slipped``
+        before this one, the new touch included even if step 4 calls it slipped: a touch is only
+        left out as slipped once a search scoring its poses on every touch (step 5) has found none
+        that fits them all."""
+        best = self.result.hypothesis(self.result.best) if self.result.best else None
+        return best is not None and all(c for i, c in enumerate(best.consistent) if i not in slipped)
+
     @property
     def _floor(self) -> float:
         """The method's ``floor`` (a fit's mean distance per unit radius on noise-free data), or :data:`FLOOR`."""
@@ -211,22 +236,33 @@ class Session:
 
     def _own_fits(self) -> np.ndarray:
         """Per touch ``(N,)``, data units: the fit its own search reached on its best model, or
-        :func:`fit_limit`, whichever is larger.  A touch never searched on its own stands in at its
-        ``fit_limit`` times the median ratio of the two over the touches that were: how near this
-        object's models let a touch's fit come to what its noise allows (the first touch is always
-        searched on its own)."""
-        limits = np.array([fit_limit(f, self._floor) for f in self.features])
-        own = np.array([np.nan if rec is None else min([r.error / r.scale for r in rec.ranking if r.ok], default=0.0)
-                        for rec in self.solo])
-        alone = ~np.isnan(own)
-        own[alone] = np.maximum(own[alone], limits[alone])
-        ratio = float(np.median(own[alone] / limits[alone])) if alone.any() else 1.0
-        return np.where(alone, own, ratio * limits)
+        :func:`fit_limit`, whichever is larger."""
+        return np.array([max(min([r.error / r.scale for r in rec.ranking if r.ok], default=0.0),
+                             fit_limit(f, self._floor)) for f, rec in zip(self.features, self.solo)])
 
     def _limits(self) -> np.ndarray:
         """Per touch ``(N,)``, data units: the largest mean distance of a fit as good as its own search
         found on any model: within three standard errors of :meth:`_own_fits`."""
         return np.array([_allowed(e, len(f.points)) for e, f in zip(self._own_fits(), self.features)])
+
+    def _unexplained(self, slipped: set) -> list[str]:
+        """The models step 5 searches again: those whose joint pose is not consistent with every
+        touch but those ``slipped`` before, and that the new touch fits on its own (its own search's
+        error within :meth:`_limits`).  When that search fitted no model (its best error beyond
+        what the touch's noise allows, :func:`fit_limit` and three standard errors), its errors
+        rule nothing out: every model whose joint pose fails some touch is searched, those it
+        deferred unrefined included."""
+        f = self.features[-1]
+        fitted = self._own_fits()[-1] <= _allowed(fit_limit(f, self._floor), len(f.points))
+        limit = self._limits()[-1] if fitted else np.inf
+        out = []
+        for r in self.solo[-1].ranking:
+            h = self.result.hypothesis(r.model)
+            fits_all = h is not None and all(c for i, c in enumerate(h.consistent) if i not in slipped)
+            own = r.error / r.scale if r.ok else (np.inf if str(r.rejected).startswith("deferred") else None)
+            if own is not None and own <= limit and not fits_all:
+                out.append(r.model)
+        return out
 
     def next(self, *, radius: float, tolerance: float = 1.0, angle: float = 60.0, candidates: int = 48, rng=None):
         """Where to touch next (:func:`tactrec.proposal.propose`)."""
@@ -257,10 +293,7 @@ class Session:
         """Which touches are consistent (module text, step 3) with poses of model ``name`` whose
         per-touch mean distances (data units) are ``per_touch (h, N)``: ``(h, N)`` bool."""
         allowed = []
-        for f, rec, stand_in in zip(self.features, self.solo, self._own_fits()):
-            if rec is None:                 # never searched on its own: the fit it stands in at
-                allowed.append(_allowed(stand_in, len(f.points)))
-                continue
+        for f, rec in zip(self.features, self.solo):
             r = next((r for r in rec.ranking if r.model == name and r.ok), None)
             allowed.append(_allowed(max(0.0 if r is None else r.error / r.scale, fit_limit(f, self._floor)),
                                     len(f.points)))

@@ -32,10 +32,8 @@ three standard errors of its mean distance), which tells a miss of the
 searches from data another model fits as well; the touches a session takes to
 reach confidence 0.99 (or 5); and the cost of adding a touch against one
 touch's recognition, two ways: against the first touches' (same run;
-medians), and against the added touch's own recognition (the ratio per add;
-median, p95, max), which the add itself ran or, where the add found a pose
-fitting every touch without it (:mod:`tactrec.session_search`), the bench
-runs after the add, outside its time.  The first touches are the
+medians), and against the added touch's own recognition, which every add runs
+first (the ratio per add; median, p95, max).  The first touches are the
 protocol's and often settle early, while later touches land anywhere on a
 face, so the first comparison mixes in how hard the touches are.  Where
 an add's time goes is reported by stage (:data:`tactrec.session.STAGES`):
@@ -75,8 +73,8 @@ SPACING = 0.3
 
 def _code_hash() -> str:
     return sources_hash(*CORE_SOURCES, "session.py", "session_fit.py", "session_pairs.py", "session_result.py",
-                        "session_search.py", "session_family.py", "proposal.py", "probability.py",
-                        "bench/multi_touch.py", "bench/fast_vs_paper.py", "bench/scale.py")
+                        "session_family.py", "proposal.py", "probability.py", "bench/multi_touch.py",
+                        "bench/fast_vs_paper.py", "bench/scale.py")
 
 
 def _first(kind: str, m_index: int, instance: int, seed: int):
@@ -167,11 +165,9 @@ def _session(task) -> dict:
             start = time.perf_counter()
             result = session.add(touch, pose)
             seconds = time.perf_counter() - start
-            # the touch alone, timed on its own where the add did not search it alone (step 1)
-            own = session.solo[-1] if session.solo[-1] is not None else rec.recognize(session.world[-1])
             steps.append({"best": result.best, "correct": result.best == entry.name,
                           "confidence": result.confidence, "seconds": seconds, "slipped": list(result.slipped),
-                          "own_seconds": own.seconds, "stages": dict(result.stages),
+                          "own_seconds": session.solo[-1].seconds, "stages": dict(result.stages),
                           "truth_found": _truth_found(session, entry, world2model)})
             if len(steps) >= TOUCHES:
                 break
