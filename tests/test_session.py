@@ -380,3 +380,29 @@ def test_multi_touch_tells_a_found_true_pose_from_a_missed_one(small):
     per_k = summary(rows)["next"]["per_touches"]
     assert [p["truth_found_percent"] for p in per_k[:2]] == [100.0, 50.0]
 
+
+def test_a_random_next_touch_is_found_within_reach_on_a_large_object():
+    """The bench's random next touch on the pitcher base (about 3% of its faces lie within 40 mm of
+    some contacts), from the face whose surroundings within reach are sparsest of 40 drawn: on 20
+    seeded draws a touch is found every time, its contact within the reach of the earlier one."""
+    from types import SimpleNamespace
+
+    from tactrec.bench.multi_touch import RADIUS, SPECS, _next_touch
+    from tactrec.surfaces import load_model
+
+    model = load_model("pitcher_base")
+    centres = np.asarray(model.vertices)[np.asarray(model.faces)].mean(axis=1)
+    rng = np.random.default_rng(3)
+    share = lambda c: np.mean(np.linalg.norm(centres - c, axis=1) <= RADIUS)   # noqa: E731
+    start = min(centres[rng.integers(len(centres), size=40)], key=share)
+    assert share(start) < 0.05, "the start is not a sparse one: the check below is weak"
+    session = SimpleNamespace(world=[SimpleNamespace(contact=start)], features=[None],
+                              recognizer=SimpleNamespace(estimation={}))
+    truth = (np.eye(3), np.zeros(3), 1.0)
+    for seed in range(20):
+        found = _next_touch("random", session, SimpleNamespace(model=model), truth, SPECS["hard-10"],
+                            np.random.default_rng(seed))
+        assert found is not None
+        data, (R, t) = found
+        world = np.concatenate(data.curves) @ R.T + t                   # the touch's points in the world
+        assert np.min(np.linalg.norm(world - start, axis=1)) <= RADIUS

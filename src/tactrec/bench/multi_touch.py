@@ -69,6 +69,10 @@ RADIUS = 40.0
 SPECS = {"hard-10": {"length": 12.0, "angle": 30.0, "noise": 0.05, "outward": False},
          "p3-78": {"length": 24.0, "angle": 60.0, "noise": 0.0, "outward": True}}
 SPACING = 0.3
+#: a random next touch: places within reach tried (a touch the estimator refuses is no place) and
+#: sites drawn in all to find them
+ATTEMPTS = 60
+DRAWS = 3000
 
 
 def _code_hash() -> str:
@@ -106,18 +110,24 @@ def _next_touch(strategy, session, entry, world2model, spec, rng):
     R, t, _ = world2model
     contacts = np.array([w.contact if w.contact is not None else f.geometry.contact
                          for w, f in zip(session.world, session.features)])
-    for attempt in range(60):
+    drawn = 0
+    for attempt in range(ATTEMPTS):
         if attempt < len(places):
             contact, directions = places[attempt]
         else:
             if strategy == "next":
                 return None
-            site = entry.model.random_sites(1, rng=rng)[0] if entry.model.kind != "mesh" else \
-                [int(rng.integers(len(entry.model.faces))), *rng.dirichlet(np.ones(3))[1:]]
-            point = entry.model.site_frame(site).point
-            contact = (point - t) @ R                                                   # model -> world
-            if np.min(np.linalg.norm(contacts - contact, axis=1)) > RADIUS:
-                continue
+            # a random place within reach: sites are drawn until one is (on a large object few are)
+            while True:
+                if drawn >= DRAWS:
+                    return None
+                drawn += 1
+                site = entry.model.random_sites(1, rng=rng)[0] if entry.model.kind != "mesh" else \
+                    [int(rng.integers(len(entry.model.faces))), *rng.dirichlet(np.ones(3))[1:]]
+                point = entry.model.site_frame(site).point
+                contact = (point - t) @ R                                               # model -> world
+                if np.min(np.linalg.norm(contacts - contact, axis=1)) <= RADIUS:
+                    break
             a = rng.uniform(0.0, 2 * np.pi)
             frame = entry.model.site_frame(site)
             d1, d2 = frame.d1 @ R, frame.d2 @ R
