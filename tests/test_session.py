@@ -405,4 +405,4 @@ def test_a_random_next_touch_is_found_within_reach_on_a_large_object():
         assert found is not None
         data, (R, t) = found
         world = np.concatenate(data.curves) @ R.T + t                   # the touch's points in the world
-        assert np.min(np.linalg.norm(world - start, axis=1)) <= RADIUS
+        assert np.min(np.linalg.norm(world - start, axis=1)) <= RADIUS + 1e-6     # rounding aside
