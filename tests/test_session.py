@@ -382,9 +382,9 @@ def test_multi_touch_tells_a_found_true_pose_from_a_missed_one(small):
 
 
 def test_a_random_next_touch_is_found_within_reach_on_a_large_object():
-    """The bench's random next touch on the pitcher base (about 3% of its faces lie within 40 mm of
-    some contacts), from the face whose surroundings within reach are sparsest of 40 drawn: on 20
-    seeded draws a touch is found every time, its contact within the reach of the earlier one."""
+    """The bench's random next touch on the pitcher base, where as few as 3% of the faces lie within
+    40 mm of a contact, from the face of 40 drawn with the fewest faces within that reach: on 20
+    seeded draws a touch is found every time, and within reach of the earlier contact."""
     from types import SimpleNamespace
 
     from tactrec.bench.multi_touch import RADIUS, SPECS, _next_touch
@@ -393,7 +393,10 @@ def test_a_random_next_touch_is_found_within_reach_on_a_large_object():
     model = load_model("pitcher_base")
     centres = np.asarray(model.vertices)[np.asarray(model.faces)].mean(axis=1)
     rng = np.random.default_rng(3)
-    share = lambda c: np.mean(np.linalg.norm(centres - c, axis=1) <= RADIUS)   # noqa: E731
+
+    def share(c):
+        return np.mean(np.linalg.norm(centres - c, axis=1) <= RADIUS)
+
     start = min(centres[rng.integers(len(centres), size=40)], key=share)
     assert share(start) < 0.05, "the start is not a sparse one: the check below is weak"
     session = SimpleNamespace(world=[SimpleNamespace(contact=start)], features=[None],
