@@ -15,8 +15,8 @@ import numpy as np
 
 from ..io.atomic import write_text_atomic
 
-__all__ = ["paper_values", "instance_rng", "run_parallel", "write_json", "default_jobs", "sources_hash",
-           "saved_record", "recognizer", "CORE_SOURCES", "errors_on_every_model", "error_cell", "SCANS",
+__all__ = ["paper_values", "instance_rng", "random_face_site", "run_parallel", "write_json", "default_jobs",
+           "sources_hash", "saved_record", "recognizer", "CORE_SOURCES", "errors_on_every_model", "error_cell", "SCANS",
            "scan_database", "within_noise"]
 
 #: the recognizers a benchmark process keeps, by models and options (their worker processes end with it)
@@ -82,6 +82,13 @@ def paper_values() -> dict:
 def instance_rng(seed: int, *keys: int) -> np.random.Generator:
     """A generator for one instance, independent of how instances are split over workers."""
     return np.random.default_rng(np.random.SeedSequence([int(seed), *map(int, keys)]))
+
+
+def random_face_site(model, rng) -> list:
+    """A site uniform over a random face of mesh ``model``: ``[face, b1, b2]`` (barycentric)."""
+    face = int(rng.integers(len(model.faces)))
+    b = rng.dirichlet(np.ones(3))
+    return [face, float(b[1]), float(b[2])]
 
 
 def default_jobs() -> int:

@@ -33,7 +33,8 @@ from ..errors import InputError
 from ..registration import mesh_fast
 from ..simulation import simulate_touch, spread_vertices
 from ..surfaces import BUILTIN_SETS
-from .common import CORE_SOURCES, instance_rng, recognizer, run_parallel, saved_record, sources_hash, write_json
+from .common import (CORE_SOURCES, instance_rng, random_face_site, recognizer, run_parallel, saved_record,
+                     sources_hash, write_json)
 
 __all__ = ["run", "PROTOCOLS", "METHODS"]
 
@@ -70,9 +71,7 @@ def _simulate(entry, m_index: int, instance: int, seed: int, protocol: str):
         site = [int(vertices[min(instance, len(vertices) - 1)])]
         return site, simulate_touch(model, site, rng=rng, **options)
     for _ in range(50):                           # a face whose sections reach the curves' length
-        face = int(rng.integers(len(model.faces)))
-        b = rng.dirichlet(np.ones(3))
-        site = [face, float(b[1]), float(b[2])]
+        site = random_face_site(model, rng)
         try:
             return site, simulate_touch(model, site, rng=rng, **options)
         except ValueError:

@@ -57,7 +57,8 @@ from ..session_fit import per_touch
 from ..simulation import random_rigid_motion, sensor_to_world, simulate_world_touch
 from ..surfaces import BUILTIN_SETS
 from .calibration import expected_calibration_error
-from .common import CORE_SOURCES, instance_rng, recognizer, run_parallel, saved_record, sources_hash, write_json
+from .common import (CORE_SOURCES, instance_rng, random_face_site, recognizer, run_parallel, saved_record,
+                     sources_hash, write_json)
 
 __all__ = ["run", "SETS", "TOUCHES", "STRATEGIES"]
 
@@ -123,13 +124,12 @@ def _next_touch(strategy, session, entry, world2model, spec, rng):
                     return None
                 drawn += 1
                 site = entry.model.random_sites(1, rng=rng)[0] if entry.model.kind != "mesh" else \
-                    [int(rng.integers(len(entry.model.faces))), *rng.dirichlet(np.ones(3))[1:]]
-                point = entry.model.site_frame(site).point
-                contact = (point - t) @ R                                               # model -> world
+                    random_face_site(entry.model, rng)
+                frame = entry.model.site_frame(site)
+                contact = (frame.point - t) @ R                                         # model -> world
                 if np.min(np.linalg.norm(contacts - contact, axis=1)) <= RADIUS:
                     break
             a = rng.uniform(0.0, 2 * np.pi)
-            frame = entry.model.site_frame(site)
             d1, d2 = frame.d1 @ R, frame.d2 @ R
             b = a + np.deg2rad(spec["angle"])
             directions = np.stack([np.cos(a) * d1 + np.sin(a) * d2, np.cos(b) * d1 + np.sin(b) * d2])
