@@ -52,8 +52,9 @@ touch and a joint refinement (more searches only in step 5):
    each (the points-weighted mean of each touch's best fit on any model, or
    of ``fit_limit``, whichever is larger): the joint form of the single
    search's rule, with no allowance above it, since a search that stops at
-   a pose a little off hands the lead to another model.  Then, when the best model's joint pose
-   is still not a fit under the touches' noise (its mean distance beyond
+   a pose a little off hands the lead to another model.  Then, when the
+   best model's joint pose is still not a fit under the touches' noise (its
+   mean distance beyond
    three standard errors of the points-weighted mean of their
    :func:`~tactrec.probability.fit_limit`), the *pair search*
    (:mod:`tactrec.session_pairs`) poses every model from the new touch and
