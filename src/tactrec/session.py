@@ -10,12 +10,10 @@ touch and a joint refinement (more searches only in step 5):
 2. for every model, the candidate poses are its joint pose so far (with the
    poses along its free motions, where they were computed) and the new
    touch's poses on it (the best and the others its search refined); each is
-   scored on all touches' points, as it is and after a search's cheap steps
-   on a few points of each curve (the better kept), and the best two are
-   refined jointly (point-to-plane Gauss-Newton on every point of every touch
-   kept; :mod:`tactrec.session_fit`, in the recognizer's worker processes);
-   within one add, a model is fitted again after a search of step 5 only
-   from its fit and that search's poses;
+   scored on all touches' points, and the best two are refined jointly
+   (point-to-plane Gauss-Newton on every point of every touch kept;
+   :mod:`tactrec.session_fit`, in the recognizer's worker processes); within one add, a model is fitted again
+   after a search of step 5 only from its fit and that search's poses;
 3. a touch is *consistent* with a pose when its mean distance under it is
    within three standard errors of its own fit on that model, or of the
    largest mean distance still a fit (:func:`tactrec.probability.fit_limit`:
@@ -82,7 +80,7 @@ from .io.touch import TactileData
 from .linalg import clearly_less
 from .probability import evidence, fit_limit, fit_standard_error, residuals
 from . import session_family, session_pairs
-from .session_fit import COARSE_POINTS, fit_stage
+from .session_fit import fit_stage
 from .session_result import Hypothesis, SessionResult
 
 
@@ -322,7 +320,7 @@ class Session:
                 items.append((np.stack([p[0] for p in poses]), np.stack([p[1] for p in poses]), poses[0][2]))
         weight = np.array([len(f.points) for f in self.features]) * use
         fitted = self.recognizer.runner.map(fit_stage, [i for i, _ in entries], [f.points for f in self.features],
-                                            weight, [f.subset(COARSE_POINTS) for f in self.features], items=items)
+                                            weight, items=items)
         for (_, e), (_, _, scale), poses in zip(entries, items, fitted):
             best = None
             for R, t, per in poses:
