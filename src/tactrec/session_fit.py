@@ -51,12 +51,15 @@ def fit_stage(held, indices, points: list, weight: np.ndarray, items: list) -> l
         per = per_touch(model, R, t, points, scale)                                      # (h, N)
         x = used * scale
         total = (per * weight).sum(axis=1)                  # element-wise: no BLAS kernel in the ranking
+        best = np.argsort(total, kind="stable")[:REFINED]
+        # one batch: every pose's steps and stopping are its own, as if refined alone
+        Rb, tb, _ = refine(model, R[best], t[best], x, JOINT_ITERATIONS)
+        per_b = per_touch(model, Rb, tb, points, scale)
         fitted = []
-        for k in np.argsort(total, kind="stable")[:REFINED]:
-            Rk, tk, _ = refine(model, R[k:k + 1], t[k:k + 1], x, JOINT_ITERATIONS)
-            per_k = per_touch(model, Rk, tk, points, scale)[0]
-            if not (per_k * weight).sum() <= total[k]:                        # keep the start if not better
-                Rk, tk, per_k = R[k:k + 1], t[k:k + 1], per[k]
-            fitted.append((Rk[0], tk[0], per_k))
+        for j, k in enumerate(best):
+            if (per_b[j] * weight).sum() <= total[k]:
+                fitted.append((Rb[j], tb[j], per_b[j]))
+            else:                                                               # keep the start if not better
+                fitted.append((R[k], t[k], per[k]))
         out.append(fitted)
     return out
