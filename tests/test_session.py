@@ -329,6 +329,27 @@ def test_multi_touch_summary_reports_the_add_cost_per_session_size():
     assert all(parts[k]["adds"] == 0 and parts[k]["over_own_median"] is None for k in STAGES)
 
 
+def test_multi_touch_keeps_each_strategys_sessions_apart():
+    """Each strategy's sessions are saved apart and merged into one row per session; a run of one
+    strategy reports that strategy alone, its first touches the cost reference."""
+    from tactrec.bench.multi_touch import _code_hash, _merged, summary
+
+    def step(correct, seconds):
+        return {"best": "a" if correct else "b", "correct": correct, "confidence": 0.9, "seconds": seconds,
+                "own_seconds": 1.0, "slipped": []}
+
+    parts = [{"set": "s", "model": "a", "instance": 0, "next": [step(True, 4.0), step(True, 3.0)]},
+             {"set": "s", "model": "a", "instance": 1, "next": [step(False, 2.0)]},
+             {"set": "s", "model": "a", "instance": 0, "random": [step(False, 4.0)]}]
+    rows = _merged(parts)
+    assert len(rows) == 2 and set(rows[0]) == {"set", "model", "instance", "next", "random"}
+    s = summary(rows[1:] + [{k: v for k, v in rows[0].items() if k != "random"}], ("next",))
+    assert set(s) == {"next", "first_touch_seconds", "sessions"}
+    assert s["next"]["add_ratio_of_medians"] == pytest.approx(3.0 / 3.0)      # first touches 2 and 4 s
+    assert s["next"]["per_touches"][1]["accuracy_percent"] == pytest.approx(50.0)
+    assert _code_hash("random") != _code_hash("next")        # random places never run the proposal code
+
+
 def test_multi_touch_summary_says_where_the_adds_time_goes():
     """The stage breakdown: per stage, the adds that ran it, its share of all adds' seconds and its
     seconds over the touch's own search (median over those adds); the first touches are not adds."""

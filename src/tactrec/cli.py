@@ -243,6 +243,16 @@ def cmd_bench(args) -> int:
         if unknown:
             raise InputError(f"unknown set {unknown[0]!r}; {args.name} has {', '.join(known)}", "--sets")
         extra["sets"] = tuple(args.sets)
+    if args.strategies is not None:
+        from .bench.multi_touch import STRATEGIES
+
+        if args.name != "multi-touch":
+            raise InputError("--strategies applies to multi-touch only", args.name)
+        unknown = [x for x in args.strategies if x not in STRATEGIES]
+        if unknown or not args.strategies:
+            raise InputError(f"unknown strategy {(unknown or [''])[0]!r}; multi-touch has {', '.join(STRATEGIES)}",
+                             "--strategies")
+        extra["strategies"] = tuple(args.strategies)
     if args.paper_option:
         extra["options"] = dict(args.paper_option)
     if args.delta_only or args.lengths or args.angles:
@@ -373,6 +383,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "(e.g. parabola_points=3, phi_step=5); repeatable")
     p.add_argument("--sets", type=lambda text: text.split(","), metavar="SET,...",
                    help="calibration (hard, p3-78) and multi-touch (hard-10, p3-78): which sets to run (default all)")
+    p.add_argument("--strategies", type=lambda text: text.split(","), metavar="NAME,...",
+                   help="multi-touch: which next-touch strategies to run (random, next; default both)")
     p.add_argument("--out", metavar="DIR", help="output folder (default bench-out)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_bench)

@@ -40,6 +40,9 @@ an add's time goes is reported by stage (:data:`tactrec.session.STAGES`):
 how many adds ran each, its share of the adds' seconds, and its seconds over
 the touch's own search.
 Plots: accuracy against touches, and the reliability of the confidence.
+Each strategy's sessions are saved apart, under a hash of the sources that
+strategy runs (random places never ask :mod:`tactrec.proposal`), and
+``strategies`` runs some of them alone.
 """
 
 from __future__ import annotations
@@ -76,9 +79,12 @@ ATTEMPTS = 60
 DRAWS = 3000
 
 
-def _code_hash() -> str:
+def _code_hash(strategy: str) -> str:
+    """The sources a strategy's sessions run: random places never ask for a proposal, so a change
+    to :mod:`tactrec.proposal` reruns ``next``'s sessions alone."""
+    proposal = ("proposal.py",) if strategy == "next" else ()
     return sources_hash(*CORE_SOURCES, "session.py", "session_fit.py", "session_pairs.py", "session_result.py",
-                        "session_family.py", "proposal.py", "probability.py", "bench/multi_touch.py",
+                        "session_family.py", *proposal, "probability.py", "bench/multi_touch.py",
                         "bench/fast_vs_paper.py", "bench/scale.py")
 
 
@@ -159,40 +165,39 @@ def _truth_found(session, entry, world2model) -> bool:
 
 
 def _session(task) -> dict:
-    kind, m_index, instance, seed = task
+    """One strategy's session: ``task = (set, scan index, instance, seed, strategy)``."""
+    kind, m_index, instance, seed, strategy = task
     db, entry, first = _first(kind, m_index, instance, seed)
     spec = SPECS[kind]
     Rw, tw = random_rigid_motion(instance_rng(seed, m_index, instance, 77), extent=200.0)
     world2model = (Rw.T, -Rw.T @ tw, 1.0)
-    rec = recognizer(db.entries)
-    out = {"set": kind, "model": entry.name, "instance": instance}
-    for strategy in STRATEGIES:
-        rng = instance_rng(seed, m_index, instance, 78 + STRATEGIES.index(strategy))
-        session = rec.session()
-        steps = []
-        touch, pose = first, sensor_to_world(first, (Rw, tw))
-        while True:
-            start = time.perf_counter()
-            result = session.add(touch, pose)
-            seconds = time.perf_counter() - start
-            steps.append({"best": result.best, "correct": result.best == entry.name,
-                          "confidence": result.confidence, "seconds": seconds, "slipped": list(result.slipped),
-                          "own_seconds": session.solo[-1].seconds, "stages": dict(result.stages),
-                          "truth_found": _truth_found(session, entry, world2model)})
-            if len(steps) >= TOUCHES:
-                break
-            start = time.perf_counter()
-            found = _next_touch(strategy, session, entry, world2model, spec, rng)
-            steps[-1]["propose_seconds"] = time.perf_counter() - start
-            if found is None:
-                break
-            touch, pose = found
-        out[strategy] = steps
-    return out
+    rng = instance_rng(seed, m_index, instance, 78 + STRATEGIES.index(strategy))
+    session = recognizer(db.entries).session()
+    steps = []
+    touch, pose = first, sensor_to_world(first, (Rw, tw))
+    while True:
+        start = time.perf_counter()
+        result = session.add(touch, pose)
+        seconds = time.perf_counter() - start
+        steps.append({"best": result.best, "correct": result.best == entry.name,
+                      "confidence": result.confidence, "seconds": seconds, "slipped": list(result.slipped),
+                      "own_seconds": session.solo[-1].seconds, "stages": dict(result.stages),
+                      "truth_found": _truth_found(session, entry, world2model)})
+        if len(steps) >= TOUCHES:
+            break
+        start = time.perf_counter()
+        found = _next_touch(strategy, session, entry, world2model, spec, rng)
+        steps[-1]["propose_seconds"] = time.perf_counter() - start
+        if found is None:
+            break
+        touch, pose = found
+    return {"set": kind, "model": entry.name, "instance": instance, strategy: steps}
 
 
 def _saved(job):
-    task, folder = job
+    task, root = job
+    folder = root / f"{task[4]}-{_code_hash(task[4])}"
+    folder.mkdir(parents=True, exist_ok=True)
     return saved_record(folder / f"{task[0]}-{task[1]}-{task[2]}-s{task[3]}.json", lambda: _session(task))
 
 
@@ -228,10 +233,11 @@ def _stages(adds: list[dict]) -> dict:
     return out
 
 
-def summary(rows: list[dict]) -> dict:
+def summary(rows: list[dict], strategies=STRATEGIES) -> dict:
+    """Per strategy of ``strategies`` (each row has every one), the figures of the module text."""
     out = {}
-    first = [r["next"][0]["seconds"] for r in rows] + [r["random"][0]["seconds"] for r in rows]
-    for strategy in STRATEGIES:
+    first = [r[strategy][0]["seconds"] for r in rows for strategy in strategies]
+    for strategy in strategies:
         per_k = []
         for k in range(1, TOUCHES + 1):
             states = [_at(r[strategy], k) for r in rows]
@@ -270,7 +276,7 @@ def _plot(table: dict, out: Path) -> None:
     plt = _plt()
     fig, ax = plt.subplots(figsize=(6, 4))
     for name, s in table["summary"].items():
-        for strategy in STRATEGIES:
+        for strategy in table["strategies"]:
             k = [p["touches"] for p in s[strategy]["per_touches"]]
             acc = [p["accuracy_percent"] for p in s[strategy]["per_touches"]]
             ax.plot(k, acc, marker="o", ls="-" if strategy == "next" else "--", label=f"{name}, {strategy}")
@@ -287,8 +293,8 @@ def _plot(table: dict, out: Path) -> None:
     ax.plot([0, 1], [0, 1], color="grey", lw=0.8, ls="--")
     for r in table["records_by_set"]:
         rows = table["records_by_set"][r]
-        conf = [s["confidence"] for row in rows for strategy in STRATEGIES for s in row[strategy]]
-        ok = [s["correct"] for row in rows for strategy in STRATEGIES for s in row[strategy]]
+        conf = [s["confidence"] for row in rows for strategy in table["strategies"] for s in row[strategy]]
+        ok = [s["correct"] for row in rows for strategy in table["strategies"] for s in row[strategy]]
         bins = reliability(conf, ok)
         ax.plot([b["confidence"] for b in bins], [b["accuracy"] for b in bins], marker="o",
                 label=f"{r} (ECE {expected_calibration_error(conf, ok):.3f})")
@@ -299,23 +305,37 @@ def _plot(table: dict, out: Path) -> None:
     save_figure(fig, out / "multi-touch-reliability.png")
 
 
+def _merged(records: list[dict]) -> list[dict]:
+    """One row per session (set, scan, instance) with every strategy's steps, in first-seen order."""
+    rows: dict = {}
+    for r in records:
+        rows.setdefault((r["set"], r["model"], r["instance"]), {}).update(r)
+    return list(rows.values())
+
+
 def run(*, out, instances: int = 10, seed: int = 0, jobs: int | None = None, quiet: bool = False, sets=SETS,
-        **_ignored) -> dict:
-    """Run the sessions of ``sets``; write ``multi-touch.json``, ``.md`` and the plots."""
+        strategies=STRATEGIES, **_ignored) -> dict:
+    """Run the sessions of ``sets`` with each of ``strategies``; write ``multi-touch.json``, ``.md``
+    and the plots.  Each strategy's sessions are saved apart, under a hash of the sources that
+    strategy runs (an interrupted or repeated run reuses them)."""
     from ..surfaces import ycb_names
 
+    strategies = tuple(s for s in STRATEGIES if s in strategies)
+    if not strategies:
+        raise ValueError(f"no strategy to run; known: {', '.join(STRATEGIES)}")
     out = Path(out)
-    folder = out / "multi-touch.parts" / _code_hash()
-    folder.mkdir(parents=True, exist_ok=True)
+    root = out / "multi-touch.parts"
     tasks = []
     if "hard-10" in sets:
         tasks += [("hard-10", m, i, seed) for m in range(len(BUILTIN_SETS["paper-fig11"])) for i in range(instances)]
     if "p3-78" in sets:
         tasks += [("p3-78", m, i, seed) for m in range(len(ycb_names())) for i in range(math.ceil(instances / 10))]
-    records = run_parallel(_saved, [(t, folder) for t in tasks], jobs=jobs or 1, quiet=quiet, desc="multi-touch")
+    jobs_ = [(t + (strategy,), root) for t in tasks for strategy in strategies]
+    records = _merged(run_parallel(_saved, jobs_, jobs=jobs or 1, quiet=quiet, desc="multi-touch"))
     by_set = {s: [r for r in records if r["set"] == s] for s in sets}
     table = {"benchmark": "multi-touch", "instances": instances, "seed": seed, "radius_mm": RADIUS,
-             "summary": {s: summary(rows) for s, rows in by_set.items() if rows}, "records": records}
+             "strategies": list(strategies),
+             "summary": {s: summary(rows, strategies) for s, rows in by_set.items() if rows}, "records": records}
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / "multi-touch.json", table)
     lines = [f"Sessions of up to {TOUCHES} touches (seed {seed}), method fast; accuracy (mean confidence) after "
@@ -325,7 +345,7 @@ def run(*, out, instances: int = 10, seed: int = 0, jobs: int | None = None, qui
              "| add / the touch alone, median / p95 / max |",
              "|---|---|" + "---|" * (TOUCHES + 4)]
     for name, s in table["summary"].items():
-        for strategy in STRATEGIES:
+        for strategy in table["strategies"]:
             st = s[strategy]
             cells = [f"{p['accuracy_percent']:.1f}% ({p['mean_confidence']:.2f})" for p in st["per_touches"]]
             a = st["add_seconds"]
@@ -339,7 +359,7 @@ def run(*, out, instances: int = 10, seed: int = 0, jobs: int | None = None, qui
               "(adds).", "", "| set | strategy | " + " | ".join(f"n = {n}" for n in range(1, TOUCHES)) + " |",
               "|---|---|" + "---|" * (TOUCHES - 1)]
     for name, s in table["summary"].items():
-        for strategy in STRATEGIES:
+        for strategy in table["strategies"]:
             cells = ["-" if b["median"] is None else f"{b['median']:.2f} ({b['adds']})"
                      for b in s[strategy]["add_over_own_by_touches"]]
             lines.append(f"| {name} | {strategy} | " + " | ".join(cells) + " |")
@@ -347,7 +367,7 @@ def run(*, out, instances: int = 10, seed: int = 0, jobs: int | None = None, qui
               "seconds, and its seconds over the added touch's own search (median over the adds that ran it).", "",
               "| set | strategy | adds | " + " | ".join(STAGES) + " |", "|---|---|---|" + "---|" * len(STAGES)]
     for name, s in table["summary"].items():
-        for strategy in STRATEGIES:
+        for strategy in table["strategies"]:
             st = s[strategy]["add_stages"]
             adds = sum(b["adds"] for b in s[strategy]["add_over_own_by_touches"])
             cells = ["-" if st[k]["share"] is None else
@@ -360,7 +380,7 @@ def run(*, out, instances: int = 10, seed: int = 0, jobs: int | None = None, qui
               "| set | strategy | " + " | ".join(str(k) for k in range(1, TOUCHES + 1)) + " |",
               "|---|---|" + "---|" * TOUCHES]
     for name, s in table["summary"].items():
-        for strategy in STRATEGIES:
+        for strategy in table["strategies"]:
             cells = ["-" if p["truth_found_percent"] is None else f"{p['truth_found_percent']:.0f}%"
                      for p in s[strategy]["per_touches"]]
             lines.append(f"| {name} | {strategy} | " + " | ".join(cells) + " |")
