@@ -235,6 +235,25 @@ def test_next_measures_a_difference_after_refitting_the_pose_the_touches_leave_f
     assert np.allclose(_excess(a, sigma), folded - sigma * np.sqrt(2 / np.pi), atol=1e-12)
 
 
+def test_next_proposes_the_widest_span_among_places_of_saturated_gain():
+    """The choice among scored places (tactrec.proposal): gains within TIE of the entropy of the best
+    count as equal and the place farthest from every earlier contact wins; a place that gains
+    clearly less is not taken however far it lies, and with one place that is the one."""
+    from tactrec.proposal import TIE, _chosen
+
+    contacts = np.array([[0.0, 0, 0], [30.0, 0, 0]])
+    entropy = 1.0
+
+    def place(gain, x):
+        return (gain, np.array([x, 8.0, 0.0]), np.array([0.0, 0, 1]), np.eye(3))
+
+    best, near_far, low_far = place(1.0, 2.0), place(1.0 - 0.5 * TIE, 15.0), place(1.0 - 2 * TIE, 60.0)
+    chosen = _chosen([best, near_far, low_far], contacts, entropy)
+    assert chosen is near_far                     # 15 mm from both contacts, the best place 8 mm from one
+    assert _chosen([best, low_far], contacts, entropy) is best
+    assert _chosen([low_far], contacts, entropy) is low_far and _chosen([], contacts, entropy) is None
+
+
 def test_a_new_touch_whose_own_search_fitted_nothing_rules_no_model_out(small):
     """Step 5's models: two noisy touches of the egg.  The second touch's own errors rule out the
     models beyond its limits only while its own search fitted some model; once every model's own
@@ -430,3 +449,36 @@ def test_a_random_next_touch_is_found_within_reach_on_a_large_object():
         data, (R, t) = found
         world = np.concatenate(data.curves) @ R.T + t                   # the touch's points in the world
         assert np.min(np.linalg.norm(world - start, axis=1)) <= RADIUS + 1e-6     # rounding aside
+
+
+def test_the_bench_asks_next_again_when_its_touch_cannot_be_made(small):
+    """The bench's next touch for ``next``: a proposed place whose touch the simulation refuses (the
+    curves along one direction) is asked for again, as a robot whose touch failed would; the touch
+    made is at the second place; a proposal of nothing ends the session."""
+    from types import SimpleNamespace
+
+    from tactrec.bench.multi_touch import SPECS, _next_touch
+
+    model = small[0].model
+    frames = [model.site_frame(s) for s in model.random_sites(2, rng=np.random.default_rng(5))]
+    bad = SimpleNamespace(contact=frames[0].point, directions=np.stack([frames[0].d1, frames[0].d1]))
+    good = SimpleNamespace(contact=frames[1].point, directions=np.stack([frames[1].d1, frames[1].d2]))
+    asked = []
+
+    def propose(proposals):
+        def next_(**_):
+            asked.append(1)
+            return proposals[min(len(asked), len(proposals)) - 1]
+        return next_
+
+    session = SimpleNamespace(world=[SimpleNamespace(contact=frames[0].point)], features=[None],
+                              recognizer=SimpleNamespace(estimation={}), next=propose([bad, good]))
+    truth = (np.eye(3), np.zeros(3), 1.0)
+    spec = dict(SPECS["hard-10"], noise=0.0)
+    data, (R, t) = _next_touch("next", session, small[0], truth, spec, np.random.default_rng(0))
+    assert len(asked) == 2
+    world = np.concatenate(data.curves) @ R.T + t
+    assert np.min(np.linalg.norm(world - frames[1].point, axis=1)) < 0.3       # the curves meet there
+    asked.clear()
+    session.next = propose([SimpleNamespace(contact=None, directions=None)])
+    assert _next_touch("next", session, small[0], truth, spec, np.random.default_rng(0)) is None and len(asked) == 1

@@ -36,8 +36,16 @@ offset ``e`` adding the folded normal's mean at ``e`` less the half-normal's
 touches' own, or the best joint fit's if that is larger.  After the touch,
 model ``M``'s probability is weighted by ``exp(-z_iM^2 / 2)``, the true
 model's by 1.  The expected gain is the entropy of the models' probabilities
-now less its expectation over the truths after the touch, in bits.  The
-candidate of largest gain is proposed.
+now less its expectation over the truths after the touch, in bits.
+
+Choice.  The gain saturates: after one touch, most places that qualify
+separate the leading hypotheses at their poses completely, and their gains
+lie within a hundredth of a bit of the entropy.  It cannot see the other
+poses of the rival models, which the session's searches find, and a touch
+beside an earlier one leaves a patch that such poses still fit.  So the
+places whose gain lies within :data:`TIE` of the entropy of the best are
+taken as equally good, and the one farthest from every earlier contact,
+which widens the touched span most, is proposed.
 """
 
 from __future__ import annotations
@@ -118,6 +126,9 @@ def _predicted(model, h, contact_w: np.ndarray, directions_w: np.ndarray, *, poi
 
 #: a hypothesis' surface is drawn at random up to this many times ``candidates`` for reachable places
 DRAWS = 50
+#: places whose expected gain lies within this fraction of the entropy (the most a touch can gain) of
+#: the best place's are as good: the one farthest from the earlier contacts among them is proposed
+TIE = 0.05
 
 
 def _reachable(model, h, contacts: np.ndarray, radius: float, count: int, rng) -> list:
@@ -256,7 +267,7 @@ def _best_place(session, leading: list, weights: np.ndarray, *, radius: float, t
     noise = float(np.median([f.noise for f in session.features]))
     sigma = max(noise, leading[0].error * np.sqrt(np.pi / 2), 1e-3 * spacing)
     entropy = _entropy(weights)
-    best = None
+    found = []
     for h in leading:
         model = models[h.model]
         for frame, c in _reachable(model, h, contacts, radius, candidates, rng):
@@ -284,6 +295,16 @@ def _best_place(session, leading: list, weights: np.ndarray, *, radius: float, t
                 after = weights[None, :] * np.exp(-0.5 * np.minimum(z * z, 1400.0))
                 after = after / after.sum(axis=1, keepdims=True)
             gain = entropy - float(sum(truth[i] * _entropy(after[i]) for i in np.nonzero(takes)[0]))
-            if best is None or gain > best[0]:
-                best = (gain, c, normal / np.linalg.norm(normal), directions)
-    return best
+            found.append((gain, c, normal / np.linalg.norm(normal), directions))
+    return _chosen(found, contacts, entropy)
+
+
+def _chosen(found: list, contacts: np.ndarray, entropy: float):
+    """The place proposed among ``found``, ``(gain, contact (3,), normal, directions)`` each: of those
+    whose gain lies within :data:`TIE` x ``entropy`` (bits) of the largest, the one farthest from
+    every earlier contact (world ``contacts (N, 3)``), the larger gain on a tie; None for none."""
+    if not found:
+        return None
+    top = max(f[0] for f in found)
+    near = [f for f in found if f[0] >= top - TIE * entropy]
+    return max(near, key=lambda f: (float(np.min(np.linalg.norm(contacts - f[1], axis=1))), f[0]))

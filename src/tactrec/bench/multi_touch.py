@@ -105,25 +105,20 @@ def _first(kind: str, m_index: int, instance: int, seed: int):
 
 def _next_touch(strategy, session, entry, world2model, spec, rng):
     """The next touch's data and ``sensor2world`` pose, or None (nothing to propose / no place).  A place
-    whose simulated touch the estimator rejects (curves tangent at the contact, say) is no place."""
+    whose simulated touch the estimator rejects (curves tangent at the contact, say) is no place: a
+    random one is drawn again, and ``next`` is asked again, as a robot whose touch failed would."""
     points = int(round(spec["length"] / SPACING)) + 1
-    if strategy == "next":
-        proposal = session.next(radius=RADIUS, angle=spec["angle"], rng=rng)
-        if proposal.contact is None:
-            return None
-        places = [(proposal.contact, proposal.directions)]
-    else:
-        places = []
     R, t, _ = world2model
     contacts = np.array([w.contact if w.contact is not None else f.geometry.contact
                          for w, f in zip(session.world, session.features)])
     drawn = 0
-    for attempt in range(ATTEMPTS):
-        if attempt < len(places):
-            contact, directions = places[attempt]
-        else:
-            if strategy == "next":
+    for _ in range(ATTEMPTS):
+        if strategy == "next":
+            proposal = session.next(radius=RADIUS, angle=spec["angle"], rng=rng)
+            if proposal.contact is None:
                 return None
+            contact, directions = proposal.contact, proposal.directions
+        else:
             # a random place within reach: sites are drawn until one is (on a large object few are)
             while True:
                 if drawn >= DRAWS:
