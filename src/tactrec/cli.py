@@ -248,10 +248,9 @@ def cmd_bench(args) -> int:
 
         if args.name != "multi-touch":
             raise InputError("--strategies applies to multi-touch only", args.name)
-        unknown = [x for x in args.strategies if x not in STRATEGIES]
-        if unknown or not args.strategies:
-            raise InputError(f"unknown strategy {(unknown or [''])[0]!r}; multi-touch has {', '.join(STRATEGIES)}",
-                             "--strategies")
+        for x in args.strategies if all(args.strategies) else [""]:
+            if x not in STRATEGIES:
+                raise InputError(f"unknown strategy {x!r}; multi-touch has {', '.join(STRATEGIES)}", "--strategies")
         extra["strategies"] = tuple(args.strategies)
     if args.paper_option:
         extra["options"] = dict(args.paper_option)
