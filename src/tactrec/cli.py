@@ -213,6 +213,15 @@ def cmd_simulate(args) -> int:
 PAPER_OPTION_BENCHMARKS = ("paper-example", "paper-table2", "paper-table3", "paper-table6", "paper-fig11")
 
 
+def _known(values: list, known, what: str, option: str, name: str) -> tuple:
+    """``values`` (an option's comma-separated list) as a tuple, each one of ``known`` (an empty
+    item, as from ``--sets ''``, is not)."""
+    unknown = [x for x in values if x not in known]
+    if unknown:
+        raise InputError(f"unknown {what} {unknown[0]!r}; {name} has {', '.join(known)}", option)
+    return tuple(values)
+
+
 def cmd_bench(args) -> int:
     from .bench import BENCHMARKS
 
@@ -239,19 +248,13 @@ def cmd_bench(args) -> int:
         known = {"calibration": CALIBRATION_SETS, "multi-touch": SESSION_SETS}.get(args.name)
         if known is None:
             raise InputError("--sets applies to calibration and multi-touch only", args.name)
-        unknown = [x for x in args.sets if x not in known]
-        if unknown:
-            raise InputError(f"unknown set {unknown[0]!r}; {args.name} has {', '.join(known)}", "--sets")
-        extra["sets"] = tuple(args.sets)
+        extra["sets"] = _known(args.sets, known, "set", "--sets", args.name)
     if args.strategies is not None:
         from .bench.multi_touch import STRATEGIES
 
         if args.name != "multi-touch":
             raise InputError("--strategies applies to multi-touch only", args.name)
-        for x in args.strategies if all(args.strategies) else [""]:
-            if x not in STRATEGIES:
-                raise InputError(f"unknown strategy {x!r}; multi-touch has {', '.join(STRATEGIES)}", "--strategies")
-        extra["strategies"] = tuple(args.strategies)
+        extra["strategies"] = _known(args.strategies, STRATEGIES, "strategy", "--strategies", args.name)
     if args.paper_option:
         extra["options"] = dict(args.paper_option)
     if args.delta_only or args.lengths or args.angles:

@@ -190,9 +190,7 @@ def _session(task) -> dict:
 
 
 def _saved(job):
-    task, root = job
-    folder = root / f"{task[4]}-{_code_hash(task[4])}"
-    folder.mkdir(parents=True, exist_ok=True)
+    task, folder = job
     return saved_record(folder / f"{task[0]}-{task[1]}-{task[2]}-s{task[3]}.json", lambda: _session(task))
 
 
@@ -319,13 +317,15 @@ def run(*, out, instances: int = 10, seed: int = 0, jobs: int | None = None, qui
     if not strategies:
         raise ValueError(f"no strategy to run; known: {', '.join(STRATEGIES)}")
     out = Path(out)
-    root = out / "multi-touch.parts"
+    folders = {s: out / "multi-touch.parts" / f"{s}-{_code_hash(s)}" for s in strategies}
+    for folder in folders.values():
+        folder.mkdir(parents=True, exist_ok=True)
     tasks = []
     if "hard-10" in sets:
         tasks += [("hard-10", m, i, seed) for m in range(len(BUILTIN_SETS["paper-fig11"])) for i in range(instances)]
     if "p3-78" in sets:
         tasks += [("p3-78", m, i, seed) for m in range(len(ycb_names())) for i in range(math.ceil(instances / 10))]
-    jobs_ = [(t + (strategy,), root) for t in tasks for strategy in strategies]
+    jobs_ = [(t + (strategy,), folders[strategy]) for t in tasks for strategy in strategies]
     records = _merged(run_parallel(_saved, jobs_, jobs=jobs or 1, quiet=quiet, desc="multi-touch"))
     by_set = {s: [r for r in records if r["set"] == s] for s in sets}
     table = {"benchmark": "multi-touch", "instances": instances, "seed": seed, "radius_mm": RADIUS,
