@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from tactrec.bench.common import instance_rng
+from tactrec.bench.multi_touch import STRATEGIES
 from tactrec.cli import main
 from tactrec.errors import InputError
 from tactrec.io.session import SessionTouch, load_session, save_session
@@ -325,7 +326,7 @@ def test_a_sessions_fits_are_the_same_in_worker_processes():
 def test_multi_touch_summary_reports_the_add_cost_per_session_size():
     """The add-cost ratios are per added touch, pooled and per session size, and a session that
     stopped early adds nothing to the later sizes."""
-    from tactrec.bench.multi_touch import summary
+    from tactrec.bench.multi_touch_report import summary
 
     def step(correct, confidence, seconds, own):
         return {"best": "a" if correct else "b", "correct": correct, "confidence": confidence,
@@ -335,7 +336,7 @@ def test_multi_touch_summary_reports_the_add_cost_per_session_size():
             step(True, 1.0, 1.0, 1.0), step(True, 1.0, 6.0, 2.0)]
     short = [step(False, 0.4, 2.0, 2.0), step(True, 1.0, 2.0, 2.0)]
     rows = [{"random": long, "next": short}, {"random": long, "next": long}]
-    s = summary(rows)
+    s = summary(rows, STRATEGIES, 5)
     by_n = s["next"]["add_over_own_by_touches"]
     assert [b["adds"] for b in by_n] == [2, 1, 1, 1]
     assert by_n[0]["median"] == pytest.approx(2.0)          # ratios 1 and 3
@@ -351,7 +352,8 @@ def test_multi_touch_summary_reports_the_add_cost_per_session_size():
 def test_multi_touch_keeps_each_strategys_sessions_apart():
     """Each strategy's sessions are saved apart and merged into one row per session; a run of one
     strategy reports that strategy alone, its first touches the cost reference."""
-    from tactrec.bench.multi_touch import _code_hash, _merged, summary
+    from tactrec.bench.multi_touch import _code_hash, _merged
+    from tactrec.bench.multi_touch_report import summary
 
     def step(correct, seconds):
         return {"best": "a" if correct else "b", "correct": correct, "confidence": 0.9, "seconds": seconds,
@@ -362,7 +364,7 @@ def test_multi_touch_keeps_each_strategys_sessions_apart():
              {"set": "s", "model": "a", "instance": 0, "random": [step(False, 4.0)]}]
     rows = _merged(parts)
     assert len(rows) == 2 and set(rows[0]) == {"set", "model", "instance", "next", "random"}
-    s = summary(rows[1:] + [{k: v for k, v in rows[0].items() if k != "random"}], ("next",))
+    s = summary(rows[1:] + [{k: v for k, v in rows[0].items() if k != "random"}], ("next",), 5)
     assert set(s) == {"next", "first_touch_seconds", "sessions"}
     assert s["next"]["add_ratio_of_medians"] == pytest.approx(3.0 / 3.0)      # first touches 2 and 4 s
     assert s["next"]["per_touches"][1]["accuracy_percent"] == pytest.approx(50.0)
@@ -372,7 +374,7 @@ def test_multi_touch_keeps_each_strategys_sessions_apart():
 def test_multi_touch_summary_says_where_the_adds_time_goes():
     """The stage breakdown: per stage, the adds that ran it, its share of all adds' seconds and its
     seconds over the touch's own search (median over those adds); the first touches are not adds."""
-    from tactrec.bench.multi_touch import summary
+    from tactrec.bench.multi_touch_report import summary
 
     def step(seconds, own, context=0.0, pairs=0.0):
         return {"best": "a", "correct": True, "confidence": 1.0, "seconds": seconds, "own_seconds": own,
@@ -381,21 +383,24 @@ def test_multi_touch_summary_says_where_the_adds_time_goes():
     first = step(100.0, 99.0)
     rows = [{"random": [first, step(2.0, 1.0), step(4.0, 1.0, context=2.0)],
              "next": [first, step(10.0, 1.0, context=3.0, pairs=5.0)]}]
-    parts = summary(rows)["random"]["add_stages"]
+    parts = summary(rows, STRATEGIES, 5)["random"]["add_stages"]
     assert [parts[k]["adds"] for k in STAGES] == [2, 2, 1, 0]
     assert parts["own"]["share"] == pytest.approx(2.0 / 6.0) and parts["context"]["share"] == pytest.approx(2.0 / 6.0)
     assert parts["own"]["over_own_median"] == pytest.approx(1.0) and parts["context"]["over_own_median"] == 2.0
     assert parts["pairs"]["share"] == 0.0 and parts["pairs"]["over_own_median"] is None
-    assert summary(rows)["next"]["add_stages"]["pairs"]["over_own_median"] == pytest.approx(5.0)
+    assert summary(rows, STRATEGIES, 5)["next"]["add_stages"]["pairs"]["over_own_median"] == pytest.approx(5.0)
 
 
-def test_multi_touch_tells_a_found_true_pose_from_a_missed_one(small):
-    """The bench's check of the true pose: a session that found it (seeded noisy touches of a small
-    mesh) passes under the true world pose, and fails once its pose of the true model fits the
-    touches 0.02 mm worse than the truth (a miss of the searches), or when it has no pose of it."""
+@pytest.mark.parametrize("noise", [0.03, 0.0])
+def test_multi_touch_tells_a_found_true_pose_from_a_missed_one(small, noise):
+    """The bench's check of the true pose: a session that found it (seeded touches of a small mesh,
+    noisy or noise-free, where the true pose fits to rounding) passes under the true world pose,
+    and fails once its pose of the true model fits the touches worse by their noise allowance
+    (a miss of the searches), or when it has no pose of it."""
     import dataclasses
 
-    from tactrec.bench.multi_touch import _truth_found, summary
+    from tactrec.bench.multi_touch import _truth
+    from tactrec.bench.multi_touch_report import summary, truth_found
 
     entry = small[0]
     Rw, tw = random_rigid_motion(instance_rng(11, 0), extent=300.0)
@@ -403,21 +408,24 @@ def test_multi_touch_tells_a_found_true_pose_from_a_missed_one(small):
     with Recognizer(small) as recognizer:
         session = recognizer.session()
         for i in range(2):
-            touch = simulate_random_touch(entry.model, rng=instance_rng(12, i), **NOISY)
+            touch = simulate_random_touch(entry.model, rng=instance_rng(12, i), **dict(NOISY, noise=noise))
             session.add(touch, sensor_to_world(touch, (Rw, tw)))
     assert session.result.best == entry.name
-    assert _truth_found(session, entry, world2model)
+    truth = _truth(session, entry, world2model)
+    assert truth["points"] == sum(len(f.points) for f in session.features)
+    assert truth_found(truth)
+    worse = max(truth["fit"], truth["limit"]) + 0.02
     h = session.result.hypothesis(entry.name)
-    worse = dataclasses.replace(h, per_touch=h.per_touch + 0.02)
-    session.result = dataclasses.replace(session.result, ranking=[worse if r is h else r
+    missed = dataclasses.replace(h, per_touch=np.full_like(np.asarray(h.per_touch), worse))
+    session.result = dataclasses.replace(session.result, ranking=[missed if r is h else r
                                                                   for r in session.result.ranking])
-    assert not _truth_found(session, entry, world2model)
-    session.result = dataclasses.replace(session.result, ranking=[r for r in session.result.ranking if r is not worse])
-    assert not _truth_found(session, entry, world2model)
+    assert not truth_found(_truth(session, entry, world2model))
+    session.result = dataclasses.replace(session.result, ranking=[r for r in session.result.ranking if r is not missed])
+    assert _truth(session, entry, world2model)["found"] is None and not truth_found(_truth(session, entry, world2model))
     step = {"best": "a", "correct": True, "confidence": 1.0, "seconds": 1.0, "own_seconds": 1.0, "slipped": []}
-    rows = [{s: [dict(step, truth_found=True), dict(step, truth_found=f)] for s in ("random", "next")}
-            for f in (True, False)]
-    per_k = summary(rows)["next"]["per_touches"]
+    found, lost = dict(truth), dict(truth, found=worse)
+    rows = [{s: [dict(step, truth=found), dict(step, truth=t)] for s in STRATEGIES} for t in (found, lost)]
+    per_k = summary(rows, STRATEGIES, 5)["next"]["per_touches"]
     assert [p["truth_found_percent"] for p in per_k[:2]] == [100.0, 50.0]
 
 

@@ -84,7 +84,7 @@ from .session_fit import fit_stage
 from .session_result import Hypothesis, SessionResult
 
 
-__all__ = ["Session", "SessionResult", "Hypothesis", "CONSISTENT_SE", "STAGES"]
+__all__ = ["Session", "SessionResult", "Hypothesis", "CONSISTENT_SE", "STAGES", "allowed_fit"]
 
 #: a touch is consistent with a pose when its mean distance is within this many standard errors of its own fit
 CONSISTENT_SE = 3.0
@@ -99,7 +99,7 @@ STARTS = 2
 STAGES = ("own", "joint", "context", "pairs")
 
 
-def _allowed(fit: float, points: int) -> float:
+def allowed_fit(fit: float, points: int) -> float:
     """The largest mean distance as good as a fit of ``fit`` over ``points`` points: within
     :data:`CONSISTENT_SE` of its standard errors."""
     return fit + CONSISTENT_SE * fit_standard_error(fit, points)
@@ -210,7 +210,7 @@ class Session:
     def allowed(self, fit: float, touches) -> float:
         """The largest points-weighted mean distance over the touches ``touches`` (indices) as good
         as a fit of ``fit``: within :data:`CONSISTENT_SE` standard errors over their points."""
-        return _allowed(fit, sum(len(self.features[i].points) for i in touches))
+        return allowed_fit(fit, sum(len(self.features[i].points) for i in touches))
 
     def _fitted(self) -> bool:
         """Whether the best model's joint pose fits the touches kept as well as their noise allows
@@ -219,7 +219,7 @@ class Session:
         if not self.result.ranking:
             return False
         use = self.kept()
-        limits = [fit_limit(self.features[i], self._floor) for i in use]
+        limits = [fit_limit(self.features[i], self.floor) for i in use]
         return self.result.ranking[0].error <= self.allowed(self.pooled(limits, use), use)
 
     def _explained(self, slipped: set) -> bool:
@@ -231,7 +231,7 @@ class Session:
         return best is not None and all(c for i, c in enumerate(best.consistent) if i not in slipped)
 
     @property
-    def _floor(self) -> float:
+    def floor(self) -> float:
         """The method's ``floor`` (a fit's mean distance per unit radius on noise-free data), or :data:`FLOOR`."""
         return getattr(self.recognizer.config, "floor", FLOOR)
 
@@ -239,12 +239,12 @@ class Session:
         """Per touch ``(N,)``, data units: the fit its own search reached on its best model, or
         :func:`fit_limit`, whichever is larger."""
         return np.array([max(min([r.error / r.scale for r in rec.ranking if r.ok], default=0.0),
-                             fit_limit(f, self._floor)) for f, rec in zip(self.features, self.solo)])
+                             fit_limit(f, self.floor)) for f, rec in zip(self.features, self.solo)])
 
     def _limits(self) -> np.ndarray:
         """Per touch ``(N,)``, data units: the largest mean distance of a fit as good as its own search
         found on any model: within three standard errors of :meth:`_own_fits`."""
-        return np.array([_allowed(e, len(f.points)) for e, f in zip(self._own_fits(), self.features)])
+        return np.array([allowed_fit(e, len(f.points)) for e, f in zip(self._own_fits(), self.features)])
 
     def _unexplained(self, slipped: set) -> list[str]:
         """The models step 5 searches again: those whose joint pose is not consistent with every
@@ -254,7 +254,7 @@ class Session:
         rule nothing out: every model whose joint pose fails some touch is searched, those it
         deferred unrefined included."""
         f = self.features[-1]
-        fitted = self._own_fits()[-1] <= _allowed(fit_limit(f, self._floor), len(f.points))
+        fitted = self._own_fits()[-1] <= allowed_fit(fit_limit(f, self.floor), len(f.points))
         limit = self._limits()[-1] if fitted else np.inf
         out = []
         for r in self.solo[-1].ranking:
@@ -296,7 +296,7 @@ class Session:
         allowed = []
         for f, rec in zip(self.features, self.solo):
             r = next((r for r in rec.ranking if r.model == name and r.ok), None)
-            allowed.append(_allowed(max(0.0 if r is None else r.error / r.scale, fit_limit(f, self._floor)),
+            allowed.append(allowed_fit(max(0.0 if r is None else r.error / r.scale, fit_limit(f, self.floor)),
                                     len(f.points)))
         return per_touch <= np.array(allowed)[None]
 

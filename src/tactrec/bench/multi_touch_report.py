@@ -1,0 +1,189 @@
+"""What ``tactrec bench multi-touch`` reports from its saved sessions (:mod:`tactrec.bench.multi_touch`).
+
+Kept apart from the sessions' code: the saved sessions are keyed by a hash of
+the sources they run, and a change to what is reported from them reruns
+none.  Each step of a saved session holds its answer, confidence, seconds
+(the add's, the touch's own search's, per stage of the add) and, for the
+true pose, the numbers :func:`truth_found` needs.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..session import STAGES, allowed_fit
+from .calibration import expected_calibration_error
+
+__all__ = ["summary", "text", "plot", "truth_found"]
+
+def truth_found(truth: dict | None) -> bool:
+    """Whether a session's pose of the true model fits the touches kept as well as the true pose:
+    its points-weighted mean distance ``truth["found"]`` (None: no pose of the true model) within
+    the session's own allowance (:func:`tactrec.session.allowed_fit` over the touches' ``points``)
+    of the true pose's ``fit``, or of the touches' ``limit`` (the points-weighted mean of their
+    :func:`~tactrec.probability.fit_limit`) where that is larger: on noise-free touches the true
+    pose fits to rounding, and a fit within the touches' noise is as good as it."""
+    if not truth or truth.get("found") is None:
+        return False
+    return bool(truth["found"] <= allowed_fit(max(truth["fit"], truth["limit"]), truth["points"]))
+
+
+def _at(steps: list, k: int) -> dict:
+    """The session's state after ``k`` touches (its last, if it stopped before)."""
+    return steps[min(k, len(steps)) - 1]
+
+
+def _quantiles(values) -> dict:
+    v = np.asarray(values, dtype=np.float64)
+    if v.size == 0:
+        return {"median": None, "p95": None, "max": None}
+    return {"median": float(np.median(v)), "p95": float(np.percentile(v, 95)), "max": float(v.max())}
+
+
+def _over_own(step: dict) -> float | None:
+    """An add's time over the added touch's own recognition (None where that was not timed)."""
+    return step["seconds"] / step["own_seconds"] if step.get("own_seconds") else None
+
+
+def _stages(adds: list[dict]) -> dict:
+    """Where the adds' time goes, per stage of :data:`tactrec.session.STAGES`: how many adds ran it,
+    its share of all the adds' seconds, and its seconds over the added touch's own search (median
+    over the adds that ran it)."""
+    adds = [a for a in adds if a.get("stages") and a.get("own_seconds")]
+    total = sum(a["seconds"] for a in adds)
+    out = {}
+    for stage in STAGES:
+        ran = [a for a in adds if a["stages"].get(stage, 0.0) > 0.0]
+        out[stage] = {"adds": len(ran), "share": sum(a["stages"][stage] for a in ran) / total if total else None,
+                      "over_own_median": float(np.median([a["stages"][stage] / a["own_seconds"] for a in ran]))
+                      if ran else None}
+    return out
+
+
+def summary(rows: list[dict], strategies, touches: int) -> dict:
+    """Per strategy of ``strategies`` (each row has every one), the figures of
+    :mod:`tactrec.bench.multi_touch`'s text, after 1 to ``touches`` touches."""
+    out = {}
+    first = [r[strategy][0]["seconds"] for r in rows for strategy in strategies]
+    for strategy in strategies:
+        per_k = []
+        for k in range(1, touches + 1):
+            states = [_at(r[strategy], k) for r in rows]
+            conf = [s["confidence"] for s in states]
+            ok = [s["correct"] for s in states]
+            found = [truth_found(s["truth"]) for s in states if "truth" in s]
+            per_k.append({"touches": k, "accuracy_percent": 100.0 * float(np.mean(ok)),
+                          "mean_confidence": float(np.mean(conf)), "ece": expected_calibration_error(conf, ok),
+                          "truth_found_percent": 100.0 * float(np.mean(found)) if found else None})
+        decide = [next((i + 1 for i, s in enumerate(r[strategy]) if s["confidence"] >= 0.99), touches)
+                  for r in rows]
+        adds = [s["seconds"] for r in rows for s in r[strategy][1:]]
+        # an add to a session of n touches, against the added touch's own recognition: a session that
+        # stops early leaves its easy adds out of the pooled median, so the medians per n are reported too
+        by_n, own = [], []
+        for n in range(1, touches):
+            ratios = [_over_own(r[strategy][n]) for r in rows if len(r[strategy]) > n]
+            ratios = [x for x in ratios if x is not None]
+            by_n.append({"touches_before": n, "adds": len(ratios), **_quantiles(ratios)})
+            own += ratios
+        out[strategy] = {"per_touches": per_k, "mean_touches_to_0.99": float(np.mean(decide)),
+                         "add_seconds": _quantiles(adds),
+                         "add_ratio_of_medians": float(np.median(adds) / np.median(first)) if adds else None,
+                         "add_over_own": _quantiles(own), "add_over_own_by_touches": by_n,
+                         "propose_seconds": _quantiles([s["propose_seconds"] for r in rows for s in r[strategy]
+                                                        if "propose_seconds" in s]),
+                         "add_stages": _stages([s for r in rows for s in r[strategy][1:]])}
+    out["first_touch_seconds"] = _quantiles(first)
+    out["sessions"] = len(rows)
+    return out
+
+
+def plot(table: dict, out: Path) -> None:
+    from ..plots import _plt, save_figure
+
+    plt = _plt()
+    touches = table["touches"]
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for name, s in table["summary"].items():
+        for strategy in table["strategies"]:
+            k = [p["touches"] for p in s[strategy]["per_touches"]]
+            acc = [p["accuracy_percent"] for p in s[strategy]["per_touches"]]
+            ax.plot(k, acc, marker="o", ls="-" if strategy == "next" else "--", label=f"{name}, {strategy}")
+    ax.axhline(99, color="grey", lw=0.8)
+    ax.set_xlabel("touches")
+    ax.set_ylabel("accuracy (%)")
+    ax.set_xticks(range(1, touches + 1))
+    ax.legend(fontsize=8)
+    ax.set_title("multi-touch sessions: accuracy against touches")
+    save_figure(fig, out / "multi-touch.png")
+    from .calibration import reliability
+
+    fig, ax = plt.subplots(figsize=(5, 5))
+    ax.plot([0, 1], [0, 1], color="grey", lw=0.8, ls="--")
+    for r in table["records_by_set"]:
+        rows = table["records_by_set"][r]
+        conf = [s["confidence"] for row in rows for strategy in table["strategies"] for s in row[strategy]]
+        ok = [s["correct"] for row in rows for strategy in table["strategies"] for s in row[strategy]]
+        bins = reliability(conf, ok)
+        ax.plot([b["confidence"] for b in bins], [b["accuracy"] for b in bins], marker="o",
+                label=f"{r} (ECE {expected_calibration_error(conf, ok):.3f})")
+    ax.set_xlabel("confidence")
+    ax.set_ylabel("accuracy")
+    ax.legend(fontsize=8)
+    ax.set_title("reliability over every session state")
+    save_figure(fig, out / "multi-touch-reliability.png")
+
+
+def text(table: dict) -> str:
+    """The run's tables (markdown): accuracy and confidence per touch count, the add's cost, where it
+    goes, and how often the true pose is found."""
+    seed, touches = table["seed"], table["touches"]
+    lines = [f"Sessions of up to {touches} touches (seed {seed}), method fast; accuracy (mean confidence) after "
+             "each touch count.", "",
+             "| set | strategy | " + " | ".join(f"{k} touch{'es' if k > 1 else ''}" for k in range(1, touches + 1))
+             + " | touches to 0.99 | add s median / p95 / max | add / first, medians "
+             "| add / the touch alone, median / p95 / max |",
+             "|---|---|" + "---|" * (touches + 4)]
+    for name, s in table["summary"].items():
+        for strategy in table["strategies"]:
+            st = s[strategy]
+            cells = [f"{p['accuracy_percent']:.1f}% ({p['mean_confidence']:.2f})" for p in st["per_touches"]]
+            a = st["add_seconds"]
+            adds = "-" if a["median"] is None else f"{a['median']:.2f} / {a['p95']:.2f} / {a['max']:.2f}"
+            ratio = "-" if st["add_ratio_of_medians"] is None else f"{st['add_ratio_of_medians']:.2f}"
+            o = st["add_over_own"]
+            own = "-" if o["median"] is None else f"{o['median']:.2f} / {o['p95']:.2f} / {o['max']:.2f}"
+            lines.append(f"| {name} ({s['sessions']}) | {strategy} | " + " | ".join(cells)
+                         + f" | {st['mean_touches_to_0.99']:.2f} | {adds} | {ratio} | {own} |")
+    lines += ["", "Adding a touch to a session of n touches, against the added touch's own recognition: median "
+              "(adds).", "", "| set | strategy | " + " | ".join(f"n = {n}" for n in range(1, touches)) + " |",
+              "|---|---|" + "---|" * (touches - 1)]
+    for name, s in table["summary"].items():
+        for strategy in table["strategies"]:
+            cells = ["-" if b["median"] is None else f"{b['median']:.2f} ({b['adds']})"
+                     for b in s[strategy]["add_over_own_by_touches"]]
+            lines.append(f"| {name} | {strategy} | " + " | ".join(cells) + " |")
+    lines += ["", "Where the adds' time goes: per stage of an add, the adds that ran it, its share of the adds' "
+              "seconds, and its seconds over the added touch's own search (median over the adds that ran it).", "",
+              "| set | strategy | adds | " + " | ".join(STAGES) + " |", "|---|---|---|" + "---|" * len(STAGES)]
+    for name, s in table["summary"].items():
+        for strategy in table["strategies"]:
+            st = s[strategy]["add_stages"]
+            adds = sum(b["adds"] for b in s[strategy]["add_over_own_by_touches"])
+            cells = ["-" if st[k]["share"] is None else
+                     f"{st[k]['adds']}, {100 * st[k]['share']:.0f}%, "
+                     + ("-" if st[k]["over_own_median"] is None else f"{st[k]['over_own_median']:.2f}")
+                     for k in STAGES]
+            lines.append(f"| {name} | {strategy} | {adds} | " + " | ".join(cells) + " |")
+    lines += ["", "Sessions whose pose of the true model fits the touches as well as the true pose does, after "
+              "each touch count (a wrong answer with the true pose found is the data's, not the searches').", "",
+              "| set | strategy | " + " | ".join(str(k) for k in range(1, touches + 1)) + " |",
+              "|---|---|" + "---|" * touches]
+    for name, s in table["summary"].items():
+        for strategy in table["strategies"]:
+            cells = ["-" if p["truth_found_percent"] is None else f"{p['truth_found_percent']:.0f}%"
+                     for p in s[strategy]["per_touches"]]
+            lines.append(f"| {name} | {strategy} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
