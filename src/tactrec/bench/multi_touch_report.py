@@ -18,6 +18,7 @@ from .calibration import expected_calibration_error
 
 __all__ = ["summary", "text", "plot", "truth_found"]
 
+
 def truth_found(truth: dict | None) -> bool:
     """Whether a session's pose of the true model fits the touches kept as well as the true pose:
     its points-weighted mean distance ``truth["found"]`` (None: no pose of the true model) within
