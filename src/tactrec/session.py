@@ -297,7 +297,7 @@ class Session:
         for f, rec in zip(self.features, self.solo):
             r = next((r for r in rec.ranking if r.model == name and r.ok), None)
             allowed.append(allowed_fit(max(0.0 if r is None else r.error / r.scale, fit_limit(f, self.floor)),
-                                    len(f.points)))
+                                       len(f.points)))
         return per_touch <= np.array(allowed)[None]
 
     def _fit_models(self, use: np.ndarray, fresh=None) -> dict[str, Hypothesis]:

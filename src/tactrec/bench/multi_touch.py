@@ -229,7 +229,8 @@ def run(*, out, instances: int = 10, seed: int = 0, jobs: int | None = None, qui
     by_set = {s: [r for r in records if r["set"] == s] for s in sets}
     table = {"benchmark": "multi-touch", "instances": instances, "seed": seed, "radius_mm": RADIUS,
              "strategies": list(strategies), "touches": TOUCHES,
-             "summary": {s: report.summary(rows, strategies, TOUCHES) for s, rows in by_set.items() if rows}, "records": records}
+             "summary": {s: report.summary(rows, strategies, TOUCHES) for s, rows in by_set.items() if rows},
+             "records": records}
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / "multi-touch.json", table)
     table["text"] = report.text(table)
