@@ -219,8 +219,11 @@ class Session:
         if not self.result.ranking:
             return False
         use = self.kept()
-        limits = [fit_limit(self.features[i], self.floor) for i in use]
-        return self.result.ranking[0].error <= self.allowed(self.pooled(limits, use), use)
+        return self.result.ranking[0].error <= self.allowed(self.limit(use), use)
+
+    def limit(self, touches) -> float:
+        """The points-weighted mean of the :func:`fit_limit` of the touches ``touches`` (indices)."""
+        return self.pooled([fit_limit(self.features[i], self.floor) for i in touches], touches)
 
     def _explained(self, slipped: set) -> bool:
         """Whether the best model's joint pose is consistent with every touch but those ``slipped``

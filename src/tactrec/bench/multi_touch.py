@@ -57,7 +57,6 @@ import numpy as np
 
 from ..features import Touch
 from ..io.atomic import write_text_atomic
-from ..probability import fit_limit
 from ..session_fit import per_touch
 from ..simulation import random_rigid_motion, sensor_to_world, simulate_world_touch
 from ..surfaces import BUILTIN_SETS
@@ -150,7 +149,7 @@ def _truth(session, entry, world2model) -> dict:
     """What :func:`tactrec.bench.multi_touch_report.truth_found` weighs, over the touches the session
     keeps: the true pose ``world2model``'s points-weighted mean distance (``fit``), the session's pose
     of the true model's (``found``; None without one), the points-weighted mean of the touches'
-    :func:`~tactrec.probability.fit_limit` (``limit``) and their points."""
+    :func:`~tactrec.probability.fit_limit` (``limit``, :meth:`~tactrec.session.Session.limit`) and their points."""
     use = session.kept()
     R, t, s = world2model
     truth = per_touch(entry.model, np.asarray(R)[None], np.asarray(t)[None],
@@ -158,7 +157,7 @@ def _truth(session, entry, world2model) -> dict:
     h = session.result.hypothesis(entry.name)
     return {"fit": session.pooled(truth, use),
             "found": None if h is None else session.pooled(np.asarray(h.per_touch)[use], use),
-            "limit": session.pooled([fit_limit(session.features[i], session.floor) for i in use], use),
+            "limit": session.limit(use),
             "points": int(sum(len(session.features[i].points) for i in use))}
 
 
