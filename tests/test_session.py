@@ -292,7 +292,9 @@ def test_a_sessions_fits_are_the_same_in_worker_processes():
     """Two sessions of three hard touches (noise 0.05 mm, 12 mm curves 30 degrees apart, no outward
     side) on scans searched under a small budget, so that adds search again with the other touches
     in the score (step 5) and fit the models again from those searches' poses: in this process and
-    in two worker processes, the same hypotheses, errors and probabilities."""
+    in two worker processes, the same hypotheses, errors and probabilities.  Step 5's searches
+    share the work the touch's own search spent: each starts only while the searches before it in
+    that add spent less."""
     from tactrec.database import build_entries
 
     hard = dict(points=41, spacing=0.3, angle=30.0, noise=0.05, noise_kind="gaussian", outward=False)
@@ -309,12 +311,15 @@ def test_a_sessions_fits_are_the_same_in_worker_processes():
                     touch = simulate_random_touch(entry.model, rng=instance_rng(32, k, j, i), **hard)
                     result = session.add(touch, sensor_to_world(touch, pose))
                     searched.append(len(session.searches) - 1)
+                    spent = [found.work for found in session.searches[1:]]
+                    assert all(sum(spent[:n]) < session.solo[-1].work for n in range(len(spent))), spent
                     stages.append((result.stages, result.seconds, len(session.searches) - 1))
                     out.append((result.best, result.slipped, result.probabilities,
                                 [(h.model, h.error, h.rotation.tobytes(), h.per_touch.tobytes()) for h in result.ranking]))
             runs[workers] = out
     assert runs[1] == runs[2]
-    assert max(searched) >= 1, "no add searched with the other touches in the score: a fit after one is not compared"
+    # a fit after a search of step 5 is compared, and so is a search started after another in one add
+    assert max(searched) >= 2, "no add ran two searches of step 5: refits and the shared budget go unchecked"
     # each add's seconds by stage: the parts add up to no more than the whole, the own search always
     # runs, and a stage of step 5 has seconds exactly when the add ran a search of it
     for parts, seconds, extra in stages:

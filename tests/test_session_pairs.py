@@ -65,3 +65,51 @@ def test_the_pair_search_finds_the_touched_model_and_its_pose():
         first += int(np.argmin(errors) == m)
         posed += int(errors[m] <= 1.1 * truth)
     assert first >= 18 and posed >= 13, (first, posed)
+
+
+def test_the_pair_search_stops_at_the_first_batch_with_a_pose_at_the_noise(monkeypatch):
+    """Sessions of two hard touches (the second within 40 mm of the first) on eight scans, the pair
+    search run on each as it stands and again through every model: it poses the models in the
+    order of the session's joint fits, whole batches, and stops after the first batch holding a
+    pose at the touches' noise, or after every model; no model it left out fits markedly better
+    (the full search's best is within the session's allowance of the stopped one's), and on at
+    least one session it stopped early."""
+    from tactrec import session_pairs
+    from tactrec.database import build_entries
+    from tactrec.recognition import Recognizer
+
+    names = ["banana", "mug", "pear", "hammer", "apple", "bowl", "baseball", "power_drill"]
+    scans = build_entries(names)
+    early = 0
+    with Recognizer(scans.entries, budget=20_000) as recognizer:
+        for k in range(4):
+            m = (2 * k) % len(names)
+            model = scans.entries[m].model
+            rng = instance_rng(41, k)
+            R, t = random_rigid_motion(rng, extent=300.0)
+            world2model = (R.T, -R.T @ t, 1.0)
+            session = recognizer.session()
+            one, where = _touch_near(model, world2model, rng)
+            two, _ = _touch_near(model, world2model, rng, near=where)
+            for f in (one, two):
+                session.add(f.data)
+            keep = session.kept()
+            order = [h.model for h in session.result.ranking]
+            order += [n for n in names if n not in order]
+            found = session_pairs.search(session, keep)
+            posed = [r.model for r in found.ranking]
+            assert posed == order[:len(posed)]
+            assert len(posed) % session_pairs.BATCH == 0 or len(posed) == len(names)
+            fits = [r.ok and session.fitted_at(r.error / r.scale, keep) for r in found.ranking]
+            batches = [fits[lo:lo + session_pairs.BATCH] for lo in range(0, len(fits), session_pairs.BATCH)]
+            assert not any(any(b) for b in batches[:-1])
+            assert any(batches[-1]) or len(posed) == len(names)
+            if len(posed) < len(names):
+                early += 1
+                with monkeypatch.context() as patch:
+                    patch.setattr(session_pairs, "BATCH", len(names))
+                    full = session_pairs.search(session, keep)
+                best = min(r.error / r.scale for r in full.ranking if r.ok)
+                stopped = min(r.error / r.scale for r in found.ranking if r.ok)
+                assert stopped <= session.allowed(best, keep), (stopped, best)
+    assert early >= 1, "no pair search stopped before the last model: the stopping rule went unchecked"

@@ -57,12 +57,22 @@ touch and a joint refinement (more searches only in step 5):
    mean distance beyond
    three standard errors of the points-weighted mean of their
    :func:`~tactrec.probability.fit_limit`), the *pair search*
-   (:mod:`tactrec.session_pairs`) poses every model from the new touch and
-   the kept touch farthest from it, over every place of the model and with
-   no curvature ranking, and steps 2-4 run again on its poses.  The
-   searches with the other touches in the score come first: each is
-   bounded by a touch's own budget, while the pair search costs several
-   times a touch's own search;
+   (:mod:`tactrec.session_pairs`) poses the models from the new touch and
+   the kept touch farthest from it, over every place of a model and with
+   no curvature ranking, and steps 2-4 run again on its poses.  It takes
+   the models a few at a time, the best joint fits first, and stops once
+   one of its poses fits the touches at their noise: the rule that starts
+   it ends it, and a search that found the leader's true pose among the
+   first models does not pose the rest.  Step 5's searches share one
+   *budget*, the work (closest-point queries) the touch's own search spent
+   in step 1: each search is given what is left (the searches with the
+   other touches in the score stop before a round of candidates that would
+   exceed it; the pair search stops after the batch of models that spends
+   it), and none starts once it is spent.  An add then costs about twice
+   the touch's own search and the joint fits, whatever the number of
+   models; a pose the budget left unfound may be found when the next touch
+   is added, whose step 5 searches again.  A method that counts no work
+   (the paper's) has no budget;
 6. the probabilities (:mod:`tactrec.probability`) come from every model's
    distances to the points of all touches kept, under its joint pose.
 """
@@ -155,13 +165,15 @@ class Session:
         self._fits = {}
         self.result = self._joint_fit()
         if self.joint_search and earlier:
-            # the searches bounded by a touch's own budget first, the pair search over every place of
-            # every model only while no pose found fits the touches at their noise
+            # step 5's searches share the work the touch's own search spent (a method that counts
+            # none has no budget): those from one touch with the others in the score, then the pair
+            # search while no pose fits the touches at their noise
+            budget = rec.work if rec.work > 0 else np.inf
             if self.recognizer.method.scores_context:
-                self._search_jointly(slipped)
-            if not self._fitted():
+                budget = self._search_jointly(slipped, budget)
+            if not self._fitted() and budget > 0:
                 found = self._timed("pairs", session_pairs.search, self,
-                                    [i for i in range(len(self.features)) if i not in slipped])
+                                    [i for i in range(len(self.features)) if i not in slipped], budget=budget)
                 if found is not None:
                     self.searches.append(found)
                     self.result = self._joint_fit(found)
@@ -176,26 +188,29 @@ class Session:
         finally:
             self._stages[stage] += time.perf_counter() - start
 
-    def _search_jointly(self, slipped: set) -> None:
+    def _search_jointly(self, slipped: set, budget: float) -> float:
         """Step 5: while no pose found fits every touch kept, search again from one of them, scoring
         poses on all: the new touch, then the one kept before it (:data:`STARTS`).  Each search covers
         the models the new touch fits on its own whose pose does not fit them all, and stops once a
-        pose fits the touches as well as their own searches fit each."""
+        pose fits the touches as well as their own searches fit each.  ``budget``: the work step 5
+        may still spend (each search is given it); returns what is left."""
         use = [i for i in range(len(self.features)) if i not in slipped]
         fit = self.pooled(self._own_fits()[use], use)
         for start in use[::-1][:STARTS]:
-            if self._explained(slipped):
-                return
+            if self._explained(slipped) or budget <= 0:
+                return budget
             among = self._unexplained(slipped)
             if not among:
-                return
+                return budget
             # a search that stopped at a pose the other touches rule out may reach the truth from
             # another touch, whose places rank by other curvatures
             context = [c for i in use if i != start for c in self.world[i].curves]
             found = self._timed("context", self.recognizer.recognize, self.world[start], context=context,
-                                among=among, fit=fit)
+                                among=among, fit=fit, budget=None if np.isinf(budget) else int(budget))
+            budget -= found.work
             self.searches.append(found)
             self.result = self._joint_fit(found)
+        return budget
 
     def kept(self) -> list[int]:
         """The touches the session's result uses: all but those it calls slipped."""
@@ -216,10 +231,12 @@ class Session:
         """Whether the best model's joint pose fits the touches kept as well as their noise allows
         (its mean distance within three standard errors of the points-weighted mean of their
         :func:`fit_limit`): then no search can fit them better."""
-        if not self.result.ranking:
-            return False
-        use = self.kept()
-        return self.result.ranking[0].error <= self.allowed(self.limit(use), use)
+        return bool(self.result.ranking) and self.fitted_at(self.result.ranking[0].error, self.kept())
+
+    def fitted_at(self, error: float, touches) -> bool:
+        """Whether a pose whose points-weighted mean distance over the touches ``touches`` (indices)
+        is ``error`` (data units) fits them as well as their noise allows (:meth:`_fitted`)."""
+        return error <= self.allowed(self.limit(touches), touches)
 
     def limit(self, touches) -> float:
         """The points-weighted mean of the :func:`fit_limit` of the touches ``touches`` (indices)."""

@@ -30,6 +30,15 @@ points and the best of them on all points.  The model's best pose and the
 others refined are returned as a
 :class:`~tactrec.registration.result.Registration` with ``alternatives``, as
 a search would, and the session's joint fit (step 2) takes them up.
+
+The models are posed :data:`BATCH` at a time, in the order of the session's
+joint fits, the best first.  The search stops after a batch in which some
+pose fits the touches at their noise (the session's own test for starting
+it): then no pose can fit them better than their noise allows, and the
+models left are not posed.  When the leading model is the true one and only
+its pose was off, the search costs a batch, not every model.  A session
+also gives it a budget of work (:mod:`tactrec.session`, step 5): it stops
+after the batch that spends it.
 """
 
 from __future__ import annotations
@@ -45,12 +54,15 @@ from .registration.result import Registration
 from .session_fit import refine
 from .surfaces.mesh_curvature import tangents
 
-__all__ = ["PairSearch", "pair_stage", "search", "turns", "SAMPLES", "CHUNK", "PLACE_CELL", "NORMAL_ERROR"]
+__all__ = ["PairSearch", "pair_stage", "search", "turns", "SAMPLES", "CHUNK", "BATCH", "PLACE_CELL", "NORMAL_ERROR"]
 
 #: oriented points sampled on a closed-form surface (a mesh: as many as its vertices, evenly over its surface)
 SAMPLES = 6000
 #: (place, turn) pairs handled at once
 CHUNK = 200_000
+#: models a pair search poses at once (a constant, so which models it searches is the same on any
+#: number of worker processes), before it asks whether a pose fits the touches at their noise
+BATCH = 4
 #: places for touch i: one sample per cubic cell this many sample spacings across
 PLACE_CELL = 2.0
 
@@ -225,10 +237,10 @@ def _scored(model, samples: _Samples, R, t, curves, options, scale):
     queries += (options["iterations"] + 1) * len(keep) * len(fine)
     order = stable_order(error)
     R, t, error = R[order], t[order], error[order]
-    Rb, tb, eb = refine(model, R[:1], t[:1], x, 2)
+    Rb, tb, eb = refine(model, R[:1], t[:1], x, options["iterations"])
     if eb[0] < error[0]:
         R, t, error = np.concatenate([Rb, R[1:]]), np.concatenate([tb, t[1:]]), np.concatenate([eb, error[1:]])
-    return R, t, error / scale, queries + 3 * len(x)
+    return R, t, error / scale, queries + (options["iterations"] + 1) * len(x)
 
 
 #: a touch's fitted normal is taken to be within this angle (radians) of the model's normal at its
@@ -236,11 +248,15 @@ def _scored(model, samples: _Samples, R, t, curves, options, scale):
 NORMAL_ERROR = np.deg2rad(5.0)
 
 
-def search(session, keep: list) -> PairSearch | None:
+def search(session, keep: list, *, budget: float = np.inf) -> PairSearch | None:
     """The pair search (module text) for a :class:`~tactrec.session.Session`: the newest of the
     touches ``keep`` (indices, oldest first) paired with the one of them farthest from it (the
-    turn is best pinned by a long pair), on every model, poses scored on the touches ``keep``, in
-    the recognizer's worker processes.  None with fewer than two touches."""
+    turn is best pinned by a long pair), poses scored on the touches ``keep``, in the recognizer's
+    worker processes.  The models are searched :data:`BATCH` at a time, in the order of the
+    session's joint fits (the best first, then those without one), until a batch yields a pose
+    that fits the touches at their noise (:meth:`~tactrec.session.Session.fitted_at`): the rule
+    that starts the search ends it; or until its work (closest-point queries) reaches ``budget``,
+    checked after each batch.  None with fewer than two touches."""
     from .methods.common import in_model_units
     from .registration.mesh_fast import data_curvatures
 
@@ -256,17 +272,26 @@ def search(session, keep: list) -> PairSearch | None:
     options = {name: getattr(config, name, default) for name, default in
                (("coarse_points", 5), ("screen", 96), ("refine", 8), ("iterations", 20))}
     options["scale"] = {i: in_model_units(session.features[keep[-1]], e.model).scale for i, e in enumerate(models)}
-    found = session.recognizer.runner.map(pair_stage, list(range(len(models))), touches, (len(keep) - 1, far),
-                                          NORMAL_ERROR, options)
+    ranked = {} if session.result is None else {h.model: k for k, h in enumerate(session.result.ranking)}
+    order = sorted(range(len(models)), key=lambda i: (ranked.get(models[i].name, len(ranked)), i))
     ranking, work = [], 0
-    for i, (e, poses) in enumerate(zip(models, found)):
-        if poses is None:
-            ranking.append(Registration.rejection(e.name, "no pose puts both contacts on the surface"))
-            continue
-        R, t, error, queries = poses
-        s = options["scale"][i]
-        ranking.append(Registration(model=e.name, error=float(error[0] * s), rotation=R[0], translation=t[0],
-                                    scale=s, candidates=len(R),
-                                    alternatives=np.concatenate([R[1:], t[1:, :, None]], axis=2)))
-        work += queries
+    for lo in range(0, len(order), BATCH):
+        batch = order[lo:lo + BATCH]
+        found = session.recognizer.runner.map(pair_stage, batch, touches, (len(keep) - 1, far), NORMAL_ERROR,
+                                              options)
+        fitted = False
+        for i, poses in zip(batch, found):
+            e = models[i]
+            if poses is None:
+                ranking.append(Registration.rejection(e.name, "no pose puts both contacts on the surface"))
+                continue
+            R, t, error, queries = poses
+            s = options["scale"][i]
+            ranking.append(Registration(model=e.name, error=float(error[0] * s), rotation=R[0], translation=t[0],
+                                        scale=s, candidates=len(R),
+                                        alternatives=np.concatenate([R[1:], t[1:, :, None]], axis=2)))
+            work += queries
+            fitted = fitted or session.fitted_at(float(error[0]), keep)
+        if fitted or work >= budget:
+            break
     return PairSearch(ranking, int(work), (keep[-1], keep[far]))
