@@ -45,7 +45,7 @@ touch and a joint refinement (more searches only in step 5):
    best error beyond ``fit_limit`` and three standard errors), its errors
    rule nothing out and every model whose pose does not fit every touch is
    covered.  Each search may try as many poses per model as the touch's own
-   search, each scored on every touch (the first screen, which every pose
+   search (within the budget below), each scored on every touch (the first screen, which every pose
    takes, on one point of each other curve: about the cost of the touch's
    own screen, :meth:`tactrec.features.Touch.screen_subset`), and it stops
    once its best pose fits the touches as well as their own searches fit
@@ -67,7 +67,7 @@ touch and a joint refinement (more searches only in step 5):
    *budget*, the work (closest-point queries) the touch's own search spent
    in step 1: each search is given what is left (the searches with the
    other touches in the score stop before a round of candidates that would
-   exceed it; the pair search stops after the batch of models that spends
+   exceed it, their first round whatever it costs; the pair search stops after the batch of models that spends
    it), and none starts once it is spent.  An add then costs about twice
    the touch's own search and the joint fits, whatever the number of
    models; a pose the budget left unfound may be found when the next touch
