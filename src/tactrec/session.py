@@ -29,50 +29,49 @@ touch and a joint refinement (more searches only in step 5):
    slipped), the new touch is searched again with the earlier touches'
    points in the score (:meth:`tactrec.recognition.Recognizer.recognize`
    with ``context``), and steps 2-4 run again on its poses; if still no pose
-   fits them all, the touch kept before it is searched the same way with
-   the others as its context (:data:`STARTS`): a touch may be searched
-   with the others in its score when it is added and again when the next
-   one is.  A search ranks a touch's places by curvature, and on a short
-   noisy touch the true place can rank beyond its schedule; another touch's
-   places rank by other curvatures.  A touch's search is not repeated from
-   every earlier touch: each such search scores all the touches, and the
-   cost of an add would grow with the square of their number.  Those
-   searches cover the models the new touch fits on its own (its own search's
-   error within three standard errors of its best model's, or of
-   ``fit_limit``) whose pose does not fit every touch: a model the touch
-   does not fit cannot fit it jointly, and one whose pose fits them all
-   needs no other.  When the new touch's own search fitted no model (its
-   best error beyond ``fit_limit`` and three standard errors), its errors
-   rule nothing out and every model whose pose does not fit every touch is
-   covered.  Each search may try as many poses per model as the touch's own
-   search (within the budget below), each scored on every touch (the first screen, which every pose
-   takes, on one point of each other curve: about the cost of the touch's
-   own screen, :meth:`tactrec.features.Touch.screen_subset`), and it stops
-   once its best pose fits the touches as well as their own searches fit
-   each (the points-weighted mean of each touch's best fit on any model, or
-   of ``fit_limit``, whichever is larger): the joint form of the single
-   search's rule, with no allowance above it, since a search that stops at
-   a pose a little off hands the lead to another model.  Then, when the
-   best model's joint pose is still not a fit under the touches' noise (its
-   mean distance beyond
-   three standard errors of the points-weighted mean of their
-   :func:`~tactrec.probability.fit_limit`), the *pair search*
+   fits them all, the touch kept before it is searched the same way with the
+   others as its context (:data:`STARTS`): a touch may be searched with the
+   others in its score when it is added and again when the next one is.  A
+   search ranks a touch's places by curvature, and on a short noisy touch
+   the true place can rank beyond its schedule; another touch's places rank
+   by other curvatures.  A touch's search is not repeated from every earlier
+   touch: each such search scores all the touches, and the cost of an add
+   would grow with the square of their number.  Those searches cover the
+   models the new touch fits on its own (its own search's error within three
+   standard errors of its best model's, or of ``fit_limit``) whose pose does
+   not fit every touch: a model the touch does not fit cannot fit it
+   jointly, and one whose pose fits them all needs no other.  When the new
+   touch's own search fitted no model (its best error beyond ``fit_limit``
+   and three standard errors), its errors rule nothing out and every model
+   whose pose does not fit every touch is covered.  Each search may try as
+   many poses per model as the touch's own search (within the budget below),
+   each scored on every touch (the first screen, which every pose takes, on
+   one point of each other curve: about the cost of the touch's own screen,
+   :meth:`tactrec.features.Touch.screen_subset`), and it stops once its best
+   pose fits the touches as well as their own searches fit each (the
+   points-weighted mean of each touch's best fit on any model, or of
+   ``fit_limit``, whichever is larger): the joint form of the single
+   search's rule, with no allowance above it, since a search that stops at a
+   pose a little off hands the lead to another model.  Then, when the best
+   model's joint pose is still not a fit under the touches' noise (its mean
+   distance beyond three standard errors of the points-weighted mean of
+   their :func:`~tactrec.probability.fit_limit`), the *pair search*
    (:mod:`tactrec.session_pairs`) poses the models from the new touch and
-   the kept touch farthest from it, over every place of a model and with
-   no curvature ranking, and steps 2-4 run again on its poses.  It takes
-   the models a few at a time, the best joint fits first, and stops once
-   one of its poses fits the touches at their noise: the rule that starts
-   it ends it, and a search that found the leader's true pose among the
-   first models does not pose the rest.  Step 5's searches share one
-   *budget*, the work (closest-point queries) the touch's own search spent
-   in step 1: each search is given what is left (the searches with the
-   other touches in the score stop before a round of candidates that would
-   exceed it, their first round whatever it costs; the pair search stops after the batch of models that spends
-   it), and none starts once it is spent.  An add then costs about twice
-   the touch's own search and the joint fits, whatever the number of
-   models; a pose the budget left unfound may be found when the next touch
-   is added, whose step 5 searches again.  A method that counts no work
-   (the paper's) has no budget;
+   the kept touch farthest from it, over every place of a model and with no
+   curvature ranking, and steps 2-4 run again on its poses.  It takes the
+   models a few at a time, the best joint fits first, and stops once one of
+   its poses fits the touches at their noise: the rule that starts it ends
+   it, and a search that found the leader's true pose among the first models
+   does not pose the rest.  Step 5's searches share one *budget*, the work
+   (closest-point queries) the touch's own search spent in step 1: each
+   search is given what is left (the searches with the other touches in the
+   score stop before a round of candidates that would exceed it, their first
+   round whatever it costs; the pair search stops after the batch of models
+   that spends it), and none starts once it is spent.  An add then costs
+   about twice the touch's own search and the joint fits, whatever the
+   number of models; a pose the budget left unfound may be found when the
+   next touch is added, whose step 5 searches again.  A method that counts
+   no work (the paper's) has no budget;
 6. the probabilities (:mod:`tactrec.probability`) come from every model's
    distances to the points of all touches kept, under its joint pose.
 """
