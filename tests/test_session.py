@@ -495,3 +495,31 @@ def test_the_bench_asks_next_again_when_its_touch_cannot_be_made(small):
     asked.clear()
     session.next = propose([SimpleNamespace(contact=None, directions=None)])
     assert _next_touch("next", session, small[0], truth, spec, np.random.default_rng(0)) is None and len(asked) == 1
+
+
+def test_the_search_budget_bounds_step_5_and_none_lifts_it():
+    """Three hard touches of the mug and of the pear, each in one world pose, on four scans
+    searched under a small budget, in sessions of three budgets for step 5: with none
+    (``search_budget=0``) no add searches beyond the touch's own; with the default, each add's
+    searches start only while they spent less than the touch's own search; without a budget
+    (None) some add spends more than that on them.  A negative budget is refused."""
+    from tactrec.database import build_entries
+
+    hard = dict(points=41, spacing=0.3, angle=30.0, noise=0.05, noise_kind="gaussian", outward=False)
+    scans = build_entries(["banana", "mug", "pear", "hammer"])
+    spent = {0.0: [], 1.0: [], None: []}
+    with Recognizer(scans.entries, budget=20_000) as recognizer:
+        for k, j in ((1, 2), (2, 1)):
+            pose = random_rigid_motion(instance_rng(30, k, j), extent=300.0)
+            for budget in spent:
+                session = recognizer.session(search_budget=budget)
+                for i in range(3):
+                    touch = simulate_random_touch(scans.entries[k].model, rng=instance_rng(32, k, j, i), **hard)
+                    session.add(touch, sensor_to_world(touch, pose))
+                    spent[budget].append(([s.work for s in session.searches[1:]], session.solo[-1].work))
+        with pytest.raises(ValueError):
+            recognizer.session(search_budget=-1.0)
+    assert all(not searches for searches, _ in spent[0.0])
+    assert all(sum(searches[:n]) < own for searches, own in spent[1.0] for n in range(len(searches)))
+    assert any(sum(searches) > own for searches, own in spent[None]), \
+        "no add searched beyond its own search's work without a budget: the option went unchecked"

@@ -273,12 +273,13 @@ class Recognizer:
         if isinstance(self.runner, _Pool):
             self.runner.close()
 
-    def session(self):
+    def session(self, **options):
         """A new :class:`~tactrec.session.Session` of touches of one object, recognised with these
-        models (nothing is rebuilt between touches)."""
+        models (nothing is rebuilt between touches); ``options`` are the session's keywords
+        (``search_budget``, ``joint_search``)."""
         from .session import Session
 
-        return Session(self)
+        return Session(self, **options)
 
     def recognize(self, data: TactileData, *, context=(), among=None, fit: float = 0.0,
                   budget: int | None = None) -> Recognition:

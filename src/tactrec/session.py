@@ -125,10 +125,17 @@ class Session:
         When the best model's pose does not fit every touch, search the new touch again with the
         earlier touches' points in the score (step 5 of the module text, for a method that scores
         a context); False keeps to step 1.
+    search_budget : float or None
+        Step 5's budget, in multiples of the work the touch's own search spent (1: an add costs
+        about twice the touch alone); None searches without one, each search to its own budget
+        and the pair search through every model while no pose fits.
     """
 
-    def __init__(self, recognizer, *, joint_search: bool = True):
+    def __init__(self, recognizer, *, joint_search: bool = True, search_budget: float | None = 1.0):
+        if search_budget is not None and not (np.isfinite(search_budget) and search_budget >= 0):
+            raise ValueError(f"search_budget must be a non-negative number or None, not {search_budget!r}")
         self.joint_search = joint_search
+        self.search_budget = search_budget
         self.searches: list = []               # this touch's recognitions: where new candidate poses come from
         self.recognizer = recognizer
         self.touches: list[SessionTouch] = []
@@ -167,7 +174,7 @@ class Session:
             # step 5's searches share the work the touch's own search spent (a method that counts
             # none has no budget): those from one touch with the others in the score, then the pair
             # search while no pose fits the touches at their noise
-            budget = rec.work if rec.work > 0 else np.inf
+            budget = np.inf if self.search_budget is None or rec.work <= 0 else self.search_budget * rec.work
             if self.recognizer.method.scores_context:
                 budget = self._search_jointly(slipped, budget)
             if not self._fitted() and budget > 0:
