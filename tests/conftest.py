@@ -12,6 +12,12 @@ def table1():
     return build_entries(["paper-table1"])
 
 
+@pytest.fixture(scope="session")
+def scans():
+    """Four YCB scans (banana, mug, pear, hammer) with their lookup tables."""
+    return build_entries(["banana", "mug", "pear", "hammer"])
+
+
 @pytest.fixture(autouse=True)
 def _quiet_numpy():
     with warnings.catch_warnings():

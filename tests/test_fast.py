@@ -67,11 +67,6 @@ def test_a_touch_larger_than_a_closed_form_patch_is_rejected():
     assert not reg.ok and "larger" in reg.rejected
 
 
-@pytest.fixture(scope="module")
-def scans():
-    return build_entries(["banana", "mug", "pear", "hammer"])
-
-
 def test_mesh_pose_recovered_from_the_sensor_frame(scans):
     entry = scans.get("banana")
     touch = simulate_touch(entry.model, [1580], points=81, spacing=0.3, angle=60.0, rng=3)

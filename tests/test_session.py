@@ -288,17 +288,14 @@ def test_a_new_touch_whose_own_search_fitted_nothing_rules_no_model_out(small):
         "the touch leaves no model beyond its limit to rule out: the check above is vacuous"
 
 
-def test_a_sessions_fits_are_the_same_in_worker_processes():
+def test_a_sessions_fits_are_the_same_in_worker_processes(scans):
     """Two sessions of three hard touches (noise 0.05 mm, 12 mm curves 30 degrees apart, no outward
     side) on scans searched under a small budget, so that adds search again with the other touches
     in the score (step 5) and fit the models again from those searches' poses: in this process and
     in two worker processes, the same hypotheses, errors and probabilities.  Step 5's searches
     share the work the touch's own search spent: each starts only while the searches before it in
     that add spent less."""
-    from tactrec.database import build_entries
-
     hard = dict(points=41, spacing=0.3, angle=30.0, noise=0.05, noise_kind="gaussian", outward=False)
-    scans = build_entries(["banana", "mug", "pear", "hammer"])
     runs, searched, stages = {}, [], []
     for workers in (1, 2):
         with Recognizer(scans.entries, workers=workers, budget=20_000) as recognizer:
@@ -497,16 +494,13 @@ def test_the_bench_asks_next_again_when_its_touch_cannot_be_made(small):
     assert _next_touch("next", session, small[0], truth, spec, np.random.default_rng(0)) is None and len(asked) == 1
 
 
-def test_the_search_budget_bounds_step_5_and_none_lifts_it():
+def test_the_search_budget_bounds_step_5_and_none_lifts_it(scans):
     """Three hard touches of the mug and of the pear, each in one world pose, on four scans
     searched under a small budget, in sessions of three budgets for step 5: with none
     (``search_budget=0``) no add searches beyond the touch's own; with the default, each add's
     searches start only while they spent less than the touch's own search; without a budget
     (None) some add spends more than that on them.  A negative budget is refused."""
-    from tactrec.database import build_entries
-
     hard = dict(points=41, spacing=0.3, angle=30.0, noise=0.05, noise_kind="gaussian", outward=False)
-    scans = build_entries(["banana", "mug", "pear", "hammer"])
     spent = {0.0: [], 1.0: [], None: []}
     with Recognizer(scans.entries, budget=20_000) as recognizer:
         for k, j in ((1, 2), (2, 1)):

@@ -39,13 +39,10 @@ def test_turns_are_the_largest_angle_to_a_neighbour_either_sign():
     assert np.allclose(turns(normals, pairs), [0.2, 0.0, np.pi / 2, np.pi / 2])
 
 
-def test_the_pair_search_finds_the_touched_model_and_its_pose():
+def test_the_pair_search_finds_the_touched_model_and_its_pose(scans):
     """Twenty seeded pairs of hard touches, the second within 40 mm of the first, on four scans in
     random world frames: on at least 18 the touched scan fits best, and on at least 13 its pose
     fits both touches to within 10% of the true pose's mean distance (the noise)."""
-    from tactrec.database import build_entries
-
-    scans = build_entries(["banana", "mug", "pear", "hammer"])
     held = _Held(scans.entries)
     options = dict(coarse_points=5, screen=96, refine=8, iterations=20, scale={i: 1.0 for i in range(4)})
     first = posed = 0
