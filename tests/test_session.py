@@ -17,6 +17,8 @@ from tactrec.session import STAGES
 from tactrec.simulation import random_rigid_motion, sensor_to_world, simulate_random_touch, simulate_world_touch
 
 NOISY = dict(points=41, spacing=0.3, angle=60.0, noise=0.03, noise_kind="gaussian", outward=False)
+#: the hard touches of ``bench multi-touch``: 12 mm curves 30 degrees apart, noise 0.05 mm, no outward side
+HARD = dict(points=41, spacing=0.3, angle=30.0, noise=0.05, noise_kind="gaussian", outward=False)
 
 
 @pytest.fixture(scope="module")
@@ -295,7 +297,6 @@ def test_a_sessions_fits_are_the_same_in_worker_processes(scans):
     in two worker processes, the same hypotheses, errors and probabilities.  Step 5's searches
     share the work the touch's own search spent: each starts only while the searches before it in
     that add spent less."""
-    hard = dict(points=41, spacing=0.3, angle=30.0, noise=0.05, noise_kind="gaussian", outward=False)
     runs, searched, stages = {}, [], []
     for workers in (1, 2):
         with Recognizer(scans.entries, workers=workers, budget=20_000) as recognizer:
@@ -305,7 +306,7 @@ def test_a_sessions_fits_are_the_same_in_worker_processes(scans):
                 session = recognizer.session()
                 pose = random_rigid_motion(instance_rng(30, k, j), extent=300.0)
                 for i in range(3):
-                    touch = simulate_random_touch(entry.model, rng=instance_rng(32, k, j, i), **hard)
+                    touch = simulate_random_touch(entry.model, rng=instance_rng(32, k, j, i), **HARD)
                     result = session.add(touch, sensor_to_world(touch, pose))
                     searched.append(len(session.searches) - 1)
                     spent = [found.work for found in session.searches[1:]]
@@ -500,7 +501,6 @@ def test_the_search_budget_bounds_step_5_and_none_lifts_it(scans):
     (``search_budget=0``) no add searches beyond the touch's own; with the default, each add's
     searches start only while they spent less than the touch's own search; without a budget
     (None) some add spends more than that on them.  A negative budget is refused."""
-    hard = dict(points=41, spacing=0.3, angle=30.0, noise=0.05, noise_kind="gaussian", outward=False)
     spent = {0.0: [], 1.0: [], None: []}
     with Recognizer(scans.entries, budget=20_000) as recognizer:
         for k, j in ((1, 2), (2, 1)):
@@ -508,7 +508,7 @@ def test_the_search_budget_bounds_step_5_and_none_lifts_it(scans):
             for budget in spent:
                 session = recognizer.session(search_budget=budget)
                 for i in range(3):
-                    touch = simulate_random_touch(scans.entries[k].model, rng=instance_rng(32, k, j, i), **hard)
+                    touch = simulate_random_touch(scans.entries[k].model, rng=instance_rng(32, k, j, i), **HARD)
                     session.add(touch, sensor_to_world(touch, pose))
                     spent[budget].append(([s.work for s in session.searches[1:]], session.solo[-1].work))
         with pytest.raises(ValueError):
