@@ -385,7 +385,7 @@ def test_db_without_index(tmp_path, data, capsys):
 
 
 @pytest.mark.parametrize("text", ["{not json", "", '{"format": "something-else", "models": []}', "[1, 2]",
-                                  '{"format": "tactrec-db", "version": 2, "models": [{"name": "x"}]}'],
+                                  '{"format": "tactrec-db", "version": 3, "models": [{"name": "x"}]}'],
                          ids=["not-json", "empty", "other-format", "list", "incomplete-entry"])
 def test_db_index_broken(db, data, capsys, text):
     index = db / "index.json"
@@ -400,7 +400,7 @@ def test_db_of_an_older_format_asks_for_a_rebuild(db, data, capsys):
     old = json.loads(index.read_text())
     old["version"] = 1
     index.write_text(json.dumps(old))
-    bad(capsys, ["recognize", data, "--db", db], index, "format version 1, this tactrec reads version 2: rebuild it")
+    bad(capsys, ["recognize", data, "--db", db], index, "format version 1, this tactrec reads version 3: rebuild it")
 
 
 def test_db_npz_altered(db, data, capsys):

@@ -35,7 +35,7 @@ __all__ = ["Database", "BuildReport", "build_database", "load_database", "build_
            "open_models", "cache_folder", "cached_database"]
 
 FORMAT = "tactrec-db"
-VERSION = 2            # 2: meshes store their fitted normals; the fast method's search needs them
+VERSION = 3            # 2: meshes store their fitted normals; 3: and their distance fields (the engine's screen)
 #: bump when table construction changes, so that old tables are rebuilt
 TABLE_VERSION = 2
 
@@ -153,8 +153,9 @@ def _load_entry(db: Path, item: dict) -> ModelEntry:
     if kind is None:
         raise InputError(f"unknown model kind {item['kind']!r}", path)
     try:
-        with np.load(io.BytesIO(blob), allow_pickle=False) as npz:
-            arrays = {k: npz[k] for k in npz.files}
+        # the arrays are read when used (a mesh's distance field on its first search); the file's
+        # checksum was checked above, so what is read later is what was written
+        arrays = np.load(io.BytesIO(blob), allow_pickle=False)
         model = kind.from_store(arrays, name=item["name"], source=item["source"])
         table = CurvatureTable.from_arrays(arrays)
     except InputError as exc:

@@ -184,6 +184,9 @@ _WORKER: list = []
 
 def _start_worker(held: _Held) -> None:
     _WORKER[:] = [held]
+    from .engine import one_thread
+
+    one_thread()                 # the processes share the cores; a kernel's own threads would only contend
 
 
 def _in_worker(stage, indices, *args) -> list:

@@ -37,8 +37,9 @@ __all__ = ["places", "frame_poses", "refine", "signed_distances", "mean_distance
 
 
 def prepare(model: MeshModel) -> None:
-    """Build what the search needs once per model (curvature field, AABB tree)."""
+    """Build what the search needs once per model (curvature field, distance field, AABB tree)."""
     model.fine_curvatures
+    model.distance_field
     model.vertex_normals
     model.distance(model.vertices[:1])
 

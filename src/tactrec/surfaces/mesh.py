@@ -31,6 +31,7 @@ from scipy import sparse
 from ..errors import InputError
 from .base import SiteFrame, SurfaceModel, TableSamples
 from .mesh_cleanup import clean_mesh
+from .mesh_field import DistanceField, build_field
 from .mesh_curvature import CurvatureField, curvature_field, paraboloid_curvatures, tangents, unit_rows
 from .mesh_sections import resample_polyline, segment_distance
 
@@ -116,7 +117,7 @@ class MeshModel(SurfaceModel):
         return {"mesh_vertices": self.vertices, "mesh_faces": self.faces,
                 "mesh_units": np.array(self.units or ""), "mesh_scale": np.array(self.scale),
                 "mesh_k1": f.k1, "mesh_k2": f.k2, "mesh_d1": f.d1, "mesh_normal": f.normal,
-                "mesh_fit_radius": np.array(f.radius)}
+                "mesh_fit_radius": np.array(f.radius), **self.distance_field.to_store()}
 
     @classmethod
     def from_store(cls, arrays, *, name: str, source: str) -> "MeshModel":
@@ -133,6 +134,9 @@ class MeshModel(SurfaceModel):
                 or field.normal.shape != (n, 3) or not all(np.all(np.isfinite(a)) for a in field[:4]):
             raise ValueError("the stored curvature field does not match the mesh")
         model.__dict__["fine_curvatures"] = field
+        if not all(key in arrays for key in DistanceField.KEYS):
+            raise ValueError("the mesh has no stored distance field")
+        model._stored_field = arrays            # read when first used: a database loads in a moment
         return model
 
     # ------------------------------------------------------------------ geometry
@@ -292,6 +296,15 @@ class MeshModel(SurfaceModel):
         from scipy.spatial import cKDTree
 
         return cKDTree(self.vertices)
+
+    @cached_property
+    def distance_field(self) -> DistanceField:
+        """The truncated signed distance field the engine screens on (:mod:`.mesh_field`), its
+        spacing following the mesh's mean edge.  Kept in a database."""
+        stored = getattr(self, "_stored_field", None)
+        if stored is not None:
+            return DistanceField.from_store(stored)
+        return build_field(self.vertices, self.faces, mean_edge=self.mean_edge)
 
     @cached_property
     def fine_curvatures(self) -> CurvatureField:

@@ -1,0 +1,314 @@
+"""Compiled kernels of the hypothesis engine (numba; cached, no fastmath).
+
+Every kernel is deterministic on every CPU: the parallel loops run over
+hypotheses (``prange``), and each hypothesis sums its points in a fixed
+order, in double precision, with no fused or reordered arithmetic.
+
+The field is the sparse brick grid of :class:`tactrec.surfaces.mesh_field.DistanceField`:
+``index (bx, by, bz) int32`` names the brick of each block of ``BRICK`` cells
+(-1: none, every cell at least the truncation away), ``bricks (nb, BRICK + 1,
+BRICK + 1, BRICK + 1) int16`` hold the signed distance at the cells' corners
+in units of ``quantum``; a point outside every brick is ``truncation`` away.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import config, njit, prange
+
+if config.THREADING_LAYER == "default":
+    # the built-in scheduler: always there, and safe in a process forked after a kernel ran (a
+    # Recognizer's workers); GNU OpenMP, numba's other default, ends such a process
+    config.THREADING_LAYER = "workqueue"
+
+__all__ = ["BRICK", "field_lookup", "field_gradient", "screen_rotations", "field_scores", "field_refine"]
+
+#: cells along a brick's edge (a brick stores BRICK + 1 samples a side, so that no lookup crosses bricks)
+BRICK = 8
+
+
+@njit(cache=True, nogil=True)
+def _sample(index, bricks, origin, inv_h, quantum, truncation, x, y, z):
+    """Signed distance at one point by trilinear interpolation; ``truncation`` outside every brick."""
+    gx = (x - origin[0]) * inv_h
+    gy = (y - origin[1]) * inv_h
+    gz = (z - origin[2]) * inv_h
+    if not (gx >= 0.0 and gy >= 0.0 and gz >= 0.0):          # also NaN
+        return truncation
+    ix = int(gx)
+    iy = int(gy)
+    iz = int(gz)
+    bx = ix // BRICK
+    by = iy // BRICK
+    bz = iz // BRICK
+    if bx >= index.shape[0] or by >= index.shape[1] or bz >= index.shape[2]:
+        return truncation
+    b = index[bx, by, bz]
+    if b < 0:
+        return truncation
+    lx = ix - bx * BRICK
+    ly = iy - by * BRICK
+    lz = iz - bz * BRICK
+    fx = gx - ix
+    fy = gy - iy
+    fz = gz - iz
+    c = bricks[b]
+    c00 = c[lx, ly, lz] * (1.0 - fx) + c[lx + 1, ly, lz] * fx
+    c10 = c[lx, ly + 1, lz] * (1.0 - fx) + c[lx + 1, ly + 1, lz] * fx
+    c01 = c[lx, ly, lz + 1] * (1.0 - fx) + c[lx + 1, ly, lz + 1] * fx
+    c11 = c[lx, ly + 1, lz + 1] * (1.0 - fx) + c[lx + 1, ly + 1, lz + 1] * fx
+    c0 = c00 * (1.0 - fy) + c10 * fy
+    c1 = c01 * (1.0 - fy) + c11 * fy
+    return (c0 * (1.0 - fz) + c1 * fz) * quantum
+
+
+@njit(cache=True, nogil=True)
+def _sample_gradient(index, bricks, origin, inv_h, quantum, truncation, x, y, z, out):
+    """Signed distance at one point and its gradient (into ``out (3,)``; zero outside every brick)."""
+    out[0] = 0.0
+    out[1] = 0.0
+    out[2] = 0.0
+    gx = (x - origin[0]) * inv_h
+    gy = (y - origin[1]) * inv_h
+    gz = (z - origin[2]) * inv_h
+    if not (gx >= 0.0 and gy >= 0.0 and gz >= 0.0):
+        return truncation
+    ix = int(gx)
+    iy = int(gy)
+    iz = int(gz)
+    bx = ix // BRICK
+    by = iy // BRICK
+    bz = iz // BRICK
+    if bx >= index.shape[0] or by >= index.shape[1] or bz >= index.shape[2]:
+        return truncation
+    b = index[bx, by, bz]
+    if b < 0:
+        return truncation
+    lx = ix - bx * BRICK
+    ly = iy - by * BRICK
+    lz = iz - bz * BRICK
+    fx = gx - ix
+    fy = gy - iy
+    fz = gz - iz
+    c = bricks[b]
+    v000 = float(c[lx, ly, lz])
+    v100 = float(c[lx + 1, ly, lz])
+    v010 = float(c[lx, ly + 1, lz])
+    v110 = float(c[lx + 1, ly + 1, lz])
+    v001 = float(c[lx, ly, lz + 1])
+    v101 = float(c[lx + 1, ly, lz + 1])
+    v011 = float(c[lx, ly + 1, lz + 1])
+    v111 = float(c[lx + 1, ly + 1, lz + 1])
+    c00 = v000 * (1.0 - fx) + v100 * fx
+    c10 = v010 * (1.0 - fx) + v110 * fx
+    c01 = v001 * (1.0 - fx) + v101 * fx
+    c11 = v011 * (1.0 - fx) + v111 * fx
+    c0 = c00 * (1.0 - fy) + c10 * fy
+    c1 = c01 * (1.0 - fy) + c11 * fy
+    s = quantum * inv_h
+    out[0] = (((v100 - v000) * (1.0 - fy) + (v110 - v010) * fy) * (1.0 - fz)
+              + ((v101 - v001) * (1.0 - fy) + (v111 - v011) * fy) * fz) * s
+    out[1] = (c10 - c00) * (1.0 - fz) * s + (c11 - c01) * fz * s
+    out[2] = (c1 - c0) * s
+    return (c0 * (1.0 - fz) + c1 * fz) * quantum
+
+
+@njit(cache=True, parallel=True)
+def field_lookup(index, bricks, origin, inv_h, quantum, truncation, points):
+    """Signed, truncated distances ``(m,)`` of ``points (m, 3)``."""
+    out = np.empty(points.shape[0])
+    for i in prange(points.shape[0]):
+        out[i] = _sample(index, bricks, origin, inv_h, quantum, truncation, points[i, 0], points[i, 1], points[i, 2])
+    return out
+
+
+@njit(cache=True, parallel=True)
+def field_gradient(index, bricks, origin, inv_h, quantum, truncation, points):
+    """Signed, truncated distances ``(m,)`` of ``points (m, 3)`` and their gradients ``(m, 3)``."""
+    d = np.empty(points.shape[0])
+    g = np.zeros((points.shape[0], 3))
+    for i in prange(points.shape[0]):
+        d[i] = _sample_gradient(index, bricks, origin, inv_h, quantum, truncation,
+                                points[i, 0], points[i, 1], points[i, 2], g[i])
+    return d, g
+
+
+@njit(cache=True)
+def screen_rotations(local, count):
+    """The data points ``local (m, 3)`` (in their contact frame: contact at the origin, normal along z)
+    turned about z by ``count`` equal steps: ``(count, m, 3)``."""
+    out = np.empty((count, local.shape[0], 3))
+    for j in range(count):
+        a = 2.0 * np.pi * j / count
+        c = np.cos(a)
+        s = np.sin(a)
+        for k in range(local.shape[0]):
+            out[j, k, 0] = c * local[k, 0] - s * local[k, 1]
+            out[j, k, 1] = s * local[k, 0] + c * local[k, 1]
+            out[j, k, 2] = local[k, 2]
+    return out
+
+
+@njit(cache=True, parallel=True)
+def field_scores(index, bricks, origin, inv_h, quantum, truncation, frames, places, turned):
+    """The screen: the mean truncated distance ``(n, r)`` of the data at each place and rotation.
+
+    ``frames (n, 3, 3)`` (columns: two tangents and the outward normal of each place),
+    ``places (n, 3)``, ``turned (r, m, 3)`` (:func:`screen_rotations`): hypothesis ``(i, j)``
+    moves a data point ``x`` to ``frames[i] @ turned[j] + places[i]``."""
+    n = frames.shape[0]
+    r = turned.shape[0]
+    m = turned.shape[1]
+    out = np.empty((n, r), dtype=np.float32)
+    for i in prange(n):
+        F = frames[i]
+        px = places[i, 0]
+        py = places[i, 1]
+        pz = places[i, 2]
+        for j in range(r):
+            total = 0.0
+            for k in range(m):
+                a = turned[j, k, 0]
+                b = turned[j, k, 1]
+                c = turned[j, k, 2]
+                x = F[0, 0] * a + F[0, 1] * b + F[0, 2] * c + px
+                y = F[1, 0] * a + F[1, 1] * b + F[1, 2] * c + py
+                z = F[2, 0] * a + F[2, 1] * b + F[2, 2] * c + pz
+                total += abs(_sample(index, bricks, origin, inv_h, quantum, truncation, x, y, z))
+            out[i, j] = total / m
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _solve6(A, b, out):
+    """``A out = b`` for a symmetric positive definite ``A (6, 6)`` (Cholesky, in place on copies)."""
+    L = np.zeros((6, 6))
+    for j in range(6):
+        s = A[j, j]
+        for k in range(j):
+            s -= L[j, k] * L[j, k]
+        if s <= 0.0:
+            for i in range(6):
+                out[i] = 0.0
+            return False
+        L[j, j] = np.sqrt(s)
+        for i in range(j + 1, 6):
+            s = A[i, j]
+            for k in range(j):
+                s -= L[i, k] * L[j, k]
+            L[i, j] = s / L[j, j]
+    y = np.empty(6)
+    for i in range(6):
+        s = b[i]
+        for k in range(i):
+            s -= L[i, k] * y[k]
+        y[i] = s / L[i, i]
+    for i in range(5, -1, -1):
+        s = y[i]
+        for k in range(i + 1, 6):
+            s -= L[k, i] * out[k]
+        out[i] = s / L[i, i]
+    return True
+
+
+@njit(cache=True, nogil=True)
+def _rodrigues(w, out):
+    """The rotation ``out (3, 3)`` of rotation vector ``w (3,)``."""
+    theta = np.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
+    if theta < 1e-300:
+        for i in range(3):
+            for j in range(3):
+                out[i, j] = 1.0 if i == j else 0.0
+        return
+    kx = w[0] / theta
+    ky = w[1] / theta
+    kz = w[2] / theta
+    s = np.sin(theta)
+    c = 1.0 - np.cos(theta)
+    out[0, 0] = 1.0 - c * (ky * ky + kz * kz)
+    out[0, 1] = -s * kz + c * kx * ky
+    out[0, 2] = s * ky + c * kx * kz
+    out[1, 0] = s * kz + c * kx * ky
+    out[1, 1] = 1.0 - c * (kx * kx + kz * kz)
+    out[1, 2] = -s * kx + c * ky * kz
+    out[2, 0] = -s * ky + c * kx * kz
+    out[2, 1] = s * kx + c * ky * kz
+    out[2, 2] = 1.0 - c * (kx * kx + ky * ky)
+
+
+@njit(cache=True, parallel=True)
+def field_refine(index, bricks, origin, inv_h, quantum, truncation, R, t, x, iterations):
+    """Point-to-plane Gauss-Newton (damped) on the field: poses ``R (h, 3, 3), t (h, 3)`` of data
+    ``x (m, 3)`` take ``iterations`` steps, each linearising the signed distances about the pose
+    (planes normal to the field's gradient).  Points beyond the truncation take no part in a step.
+    Returns the poses and their mean truncated distances ``(h,)`` after the last step."""
+    h = R.shape[0]
+    m = x.shape[0]
+    Ro = R.copy()
+    to = t.copy()
+    score = np.empty(h)
+    for i in prange(h):
+        Ri = Ro[i]
+        ti = to[i]
+        g = np.empty(3)
+        A = np.empty((6, 6))
+        b = np.empty(6)
+        step = np.empty(6)
+        dR = np.empty((3, 3))
+        tmp = np.empty((3, 3))
+        J = np.empty(6)
+        for _ in range(iterations):
+            for p in range(6):
+                b[p] = 0.0
+                for q in range(6):
+                    A[p, q] = 0.0
+            for k in range(m):
+                y0 = Ri[0, 0] * x[k, 0] + Ri[0, 1] * x[k, 1] + Ri[0, 2] * x[k, 2] + ti[0]
+                y1 = Ri[1, 0] * x[k, 0] + Ri[1, 1] * x[k, 1] + Ri[1, 2] * x[k, 2] + ti[1]
+                y2 = Ri[2, 0] * x[k, 0] + Ri[2, 1] * x[k, 1] + Ri[2, 2] * x[k, 2] + ti[2]
+                d = _sample_gradient(index, bricks, origin, inv_h, quantum, truncation, y0, y1, y2, g)
+                if abs(d) >= truncation:
+                    continue
+                J[0] = y1 * g[2] - y2 * g[1]
+                J[1] = y2 * g[0] - y0 * g[2]
+                J[2] = y0 * g[1] - y1 * g[0]
+                J[3] = g[0]
+                J[4] = g[1]
+                J[5] = g[2]
+                for p in range(6):
+                    b[p] -= J[p] * d
+                    for q in range(p, 6):
+                        A[p, q] += J[p] * J[q]
+            trace = 0.0
+            for p in range(6):
+                trace += A[p, p]
+                for q in range(p):
+                    A[p, q] = A[q, p]
+            if trace <= 0.0:
+                break
+            damp = 1e-6 * (trace / 6.0 + 1e-12)
+            for p in range(6):
+                A[p, p] += damp
+            if not _solve6(A, b, step):
+                break
+            _rodrigues(step[:3], dR)
+            for r in range(3):
+                for c in range(3):
+                    tmp[r, c] = dR[r, 0] * Ri[0, c] + dR[r, 1] * Ri[1, c] + dR[r, 2] * Ri[2, c]
+            t0 = dR[0, 0] * ti[0] + dR[0, 1] * ti[1] + dR[0, 2] * ti[2] + step[3]
+            t1 = dR[1, 0] * ti[0] + dR[1, 1] * ti[1] + dR[1, 2] * ti[2] + step[4]
+            t2 = dR[2, 0] * ti[0] + dR[2, 1] * ti[1] + dR[2, 2] * ti[2] + step[5]
+            for r in range(3):
+                for c in range(3):
+                    Ri[r, c] = tmp[r, c]
+            ti[0] = t0
+            ti[1] = t1
+            ti[2] = t2
+        total = 0.0
+        for k in range(m):
+            y0 = Ri[0, 0] * x[k, 0] + Ri[0, 1] * x[k, 1] + Ri[0, 2] * x[k, 2] + ti[0]
+            y1 = Ri[1, 0] * x[k, 0] + Ri[1, 1] * x[k, 1] + Ri[1, 2] * x[k, 2] + ti[1]
+            y2 = Ri[2, 0] * x[k, 0] + Ri[2, 1] * x[k, 1] + Ri[2, 2] * x[k, 2] + ti[2]
+            total += abs(_sample(index, bricks, origin, inv_h, quantum, truncation, y0, y1, y2))
+        score[i] = total / m
+    return Ro, to, score

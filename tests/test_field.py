@@ -1,0 +1,126 @@
+"""The distance field of a mesh and the engine's compiled kernels (:mod:`tactrec.engine`)."""
+
+import numpy as np
+import pytest
+import trimesh
+
+from tactrec.engine.kernels import field_gradient, field_refine, field_scores, screen_rotations
+from tactrec.registration import mesh_fast
+from tactrec.registration.result import rotations_from_vectors
+from tactrec.surfaces.mesh import MeshModel
+from tactrec.surfaces.mesh_field import BAND, DistanceField, build_field
+
+RADIUS = 30.0
+
+
+@pytest.fixture(scope="module")
+def sphere():
+    tm = trimesh.creation.icosphere(subdivisions=5, radius=RADIUS)
+    return MeshModel(np.asarray(tm.vertices), np.asarray(tm.faces), name="sphere")
+
+
+@pytest.fixture(scope="module")
+def open_cylinder():
+    from test_mesh import grid_cylinder
+
+    tm = grid_cylinder()
+    return MeshModel(np.asarray(tm.vertices), np.asarray(tm.faces), name="cylinder")
+
+
+def _band_points(model, rng, count, spread):
+    """Points within ``spread`` of random surface points, along the face normals."""
+    face = rng.integers(0, len(model.faces), count)
+    b = rng.dirichlet([1.0, 1.0, 1.0], count)
+    p = np.einsum("ij,ijk->ik", b, model.vertices[model.faces[face]])
+    return p + model.face_normals[face] * rng.uniform(-spread, spread, count)[:, None]
+
+
+def test_the_field_is_the_signed_distance_within_its_interpolation_error(sphere):
+    field = sphere.distance_field
+    assert field.spacing == pytest.approx(0.35 * sphere.mean_edge)
+    assert field.truncation == pytest.approx(BAND * field.spacing)
+    p = _band_points(sphere, np.random.default_rng(0), 5000, 0.8 * field.truncation)
+    exact = sphere.distance(p) * np.sign(np.linalg.norm(p, axis=1) - RADIUS)       # outside positive
+    kept = np.abs(exact) < field.truncation - 2 * field.spacing                     # no corner clipped
+    error = np.abs(field.signed(p) - exact)[kept]
+    # trilinear interpolation of a smooth distance: off by about h^2 |kappa| / 8; a polyhedron's
+    # distance has kinks inside, beside its edges, where it is off by a few per cent of the spacing
+    assert np.median(error) < 2 * (field.spacing ** 2 / RADIUS / 8 + field.quantum)
+    assert np.percentile(error, 99) < 0.015 * field.spacing
+    assert np.max(error) < 0.05 * field.spacing
+
+
+def test_far_from_the_surface_the_field_is_its_truncation(sphere):
+    field = sphere.distance_field
+    far = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, RADIUS + 2 * field.truncation], [1e4, 0, 0], [np.nan, 0, 0]])
+    np.testing.assert_array_equal(field.distance(far), field.truncation)
+
+
+def test_an_open_scan_is_signed_by_the_side_of_its_normal(open_cylinder):
+    field = open_cylinder.distance_field
+    p = _band_points(open_cylinder, np.random.default_rng(1), 2000, 0.8 * field.truncation)
+    p = p[np.abs(p[:, 2]) < 25]                                                    # away from the open rims
+    exact = mesh_fast.signed_distances(open_cylinder, p)          # the side of the closest face's normal
+    d = field.signed(p)
+    sure = np.abs(exact) > 0.05 * field.spacing
+    assert np.all(np.sign(d[sure]) == np.sign(exact[sure]))
+    assert np.all(np.sign(exact[sure]) == np.sign(np.hypot(p[sure, 0], p[sure, 1]) - 15.0))   # outward
+
+
+def test_the_gradient_is_the_fields_and_a_unit_normal_near_the_surface(sphere):
+    field = sphere.distance_field
+    p = _band_points(sphere, np.random.default_rng(2), 200, 0.5 * field.truncation)
+    d, g = field_gradient(*field.args(), p)
+    np.testing.assert_allclose(d, field.signed(p))
+    e = 1e-5
+    numeric = np.stack([(field.signed(p + e * np.eye(3)[k]) - field.signed(p - e * np.eye(3)[k])) / (2 * e)
+                        for k in range(3)], axis=1)
+    inside = np.all(np.abs(numeric - g) < 1e-4, axis=1)                            # not on a cell face
+    assert inside.mean() > 0.95
+    np.testing.assert_allclose(np.linalg.norm(g, axis=1), 1.0, atol=0.02)
+    np.testing.assert_allclose(g / np.linalg.norm(g, axis=1, keepdims=True),
+                               p / np.linalg.norm(p, axis=1, keepdims=True), atol=0.02)
+
+
+def test_the_field_survives_storage_and_a_malformed_one_is_refused(sphere):
+    field = sphere.distance_field
+    again = DistanceField.from_store(field.to_store())
+    p = _band_points(sphere, np.random.default_rng(3), 100, 1.0)
+    np.testing.assert_array_equal(again.signed(p), field.signed(p))
+    for key, bad in [("field_bricks", field.bricks.astype(np.float32)), ("field_index", field.index + len(field.bricks)),
+                     ("field_spacing", np.array(-1.0)), ("field_origin", np.zeros(2))]:
+        with pytest.raises(ValueError, match="distance field"):
+            DistanceField.from_store(dict(field.to_store(), **{key: bad}))
+
+
+def test_the_screen_scores_a_pose_by_its_mean_truncated_distance(sphere):
+    field = sphere.distance_field
+    rng = np.random.default_rng(4)
+    local = rng.normal(size=(7, 3)) * [5.0, 5.0, 0.3]
+    places = sphere.vertices[:50]
+    normals = sphere.vertex_normals[:50]
+    helper = np.where(np.abs(normals[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]])
+    d1 = helper - np.sum(helper * normals, axis=1, keepdims=True) * normals
+    d1 /= np.linalg.norm(d1, axis=1, keepdims=True)
+    frames = np.stack([d1, np.cross(normals, d1), normals], axis=2)
+    turned = screen_rotations(local, 12)
+    scores = field_scores(*field.args(), np.ascontiguousarray(frames), np.ascontiguousarray(places), turned)
+    moved = np.einsum("nij,rmj->nrmi", frames, turned) + places[:, None, None]
+    np.testing.assert_allclose(scores, np.abs(field.signed(moved)).mean(axis=-1), rtol=1e-6)
+
+
+def test_gauss_newton_on_the_field_recovers_a_perturbed_pose_on_a_scan(scans):
+    model = scans.get("banana").model
+    field = model.distance_field
+    rng = np.random.default_rng(5)
+    ok = 0
+    for trial in range(20):
+        centre = model.vertices[rng.integers(len(model.vertices))]
+        x = model.vertices[np.argsort(np.linalg.norm(model.vertices - centre, axis=1))[:60]]
+        R = rotations_from_vectors(np.deg2rad(3.0) * rng.normal(size=(1, 3)) / np.sqrt(3))
+        t = centre - R[0] @ centre + rng.normal(size=3) * 0.5
+        before = mesh_fast.mean_distance(model, R, t[None], x)[0]
+        R2, t2, score = field_refine(*field.args(), R, t[None], x, 10)
+        after = mesh_fast.mean_distance(model, R2, t2, x)[0]
+        ok += after < min(0.05, before / 4)
+    assert ok >= 18
