@@ -299,7 +299,7 @@ def test_a_sessions_fits_are_the_same_in_worker_processes(scans):
     that add spent less."""
     runs, searched, stages = {}, [], []
     for workers in (1, 2):
-        with Recognizer(scans.entries, workers=workers, budget=20_000) as recognizer:
+        with Recognizer(scans.entries, workers=workers, budget=10_000) as recognizer:
             out = []
             for k, j in ((1, 2), (2, 1)):
                 entry = scans.entries[k]

@@ -3,10 +3,11 @@
 The hypotheses are (model, place, rotation about the normal, tilt of the
 normal, sign of the normal).  The search takes them in *tiers*
 (:data:`TIERS`), each a step coarse to fine: the few places whose curvature
-best matches the data's, posed by their principal frames; more places; every
-30 degrees at more places (for flat and sharp patches, where curvature and
-principal directions say little); the normal tilted (for a contact on a
-crease, where the estimated normal is off).  A tier on a set of models is
+best matches the data's, posed by their principal frames; then every place
+at every rotation, screened on the model's distance field
+(:mod:`tactrec.engine.screen`), the best 500 places by curvature first and
+then the rest: the curvature index orders the places, it does not filter
+them.  A tier on a set of models is
 
 1. *cheap stage* (per model, :func:`_cheap`): the tier's new hypotheses are
    posed from frames (:func:`tactrec.registration.mesh_fast.frame_poses`) and
@@ -14,8 +15,11 @@ crease, where the estimated normal is off).  A tier on a set of models is
    ``coarse_points`` points a curve (after the first, only the best eighth,
    at least ``screen``, go on; with a context, the first step, which every
    hypothesis takes, scores the context on one point a curve, its middle:
-   :meth:`tactrec.features.Touch.screen_subset`); each place keeps its best
-   rotation and the model its best ``refine`` poses;
+   :meth:`tactrec.features.Touch.screen_subset`); or, in a field tier, are
+   screened on the field in ``screen_stages`` (the best ``screen_keep`` take
+   ``field_steps`` Gauss-Newton steps on the field and the best ``2 refine``
+   of those one exact step); each place keeps its best rotation and the
+   model its best ``refine`` poses;
 2. *selection* (across models): a pose is refined when its cheap score lies
    within ``ratio`` x the best error so far (or the tier's best cheap score);
    the others are deferred, not dropped;
@@ -40,11 +44,13 @@ to chosen models (the budget counts those alone).  It also stops before a round 
 work (closest-point queries) past ``budget`` per model; such a search is
 reported as not settled (the budget counts per model and per normal tried:
 twice as much without an ``outward`` hint; a caller may give a lower one in
-all).  A round's cost is counted on the touch's own curves, so the budget
-bounds the poses tried: a search with other touches in its score (a
-session's) tries as many as the touch alone would and spends queries in
-proportion to the points it scores (on the first screen, about what the
-touch alone spends).  The best ``polish`` models then take
+all).  A field lookup counts as :data:`~tactrec.engine.screen.LOOKUP_COST`
+of a query, and the final polish is reserved.  A round's cost is counted on
+the touch's own curves, and the work on other touches' points at the
+touch's share of the points scored, so the budget bounds the poses tried: a
+search with other touches in its score (a session's) tries as many as the
+touch alone would and spends queries in proportion to the points it scores
+(on the first screens, about what the touch alone spends).  The best ``polish`` models then take
 ``polish_iterations`` more steps on all points.
 
 Every cut in a ranked list (screen, rotations, refinement) orders near-equal
@@ -61,6 +67,7 @@ import dataclasses
 
 import numpy as np
 
+from ..engine.screen import LOOKUP_COST
 from ..linalg import clearly_less
 from ..probability import fit_limit, fit_standard_error
 from ..registration import closedform_fast, mesh_fast
@@ -75,7 +82,8 @@ __all__ = ["FastMethod", "FastConfig", "Tier", "TIERS"]
 class Tier:
     """One step of the schedule: the best ``places`` places per model and normal (None: every
     vertex), posed by their principal ``"frames"`` or at ``"all"`` 30-degree rotations, with the
-    normal as estimated or also ``tilt`` degrees off four ways."""
+    normal as estimated or also ``tilt`` degrees off four ways; or every place at every rotation,
+    screened on the model's distance field (``"field"``: :mod:`tactrec.engine.screen`)."""
 
     places: int | None
     rotations: str = "frames"
@@ -84,14 +92,14 @@ class Tier:
     def __post_init__(self):
         if self.places is not None and (not isinstance(self.places, int) or self.places < 1):
             raise ValueError(f"a tier's places must be a whole number >= 1 or None, got {self.places!r}")
-        if self.rotations not in ("frames", "all"):
-            raise ValueError(f"a tier's rotations are 'frames' or 'all', got {self.rotations!r}")
+        if self.rotations not in ("frames", "all", "field"):
+            raise ValueError(f"a tier's rotations are 'frames', 'all' or 'field', got {self.rotations!r}")
         if not 0.0 <= self.tilt < 90.0:
             raise ValueError(f"a tier's tilt is in [0, 90) degrees, got {self.tilt!r}")
 
 
 #: the default schedule, coarse to fine
-TIERS = (Tier(24), Tier(150), Tier(600, "all"), Tier(150, "all", 15.0))
+TIERS = (Tier(24), Tier(500, "field"), Tier(None, "field"))
 #: the exhaustive reference: every vertex, every 30 degrees
 EXHAUSTIVE = (Tier(None, "all"),)
 
@@ -116,13 +124,17 @@ class FastConfig(Config):
     within: float = 3.0
     tolerance: float = 1e-5
     candidates: int = closedform_fast.DEFAULTS["candidates"]
+    screen_step: float = 0.17
+    screen_stages: tuple = ((36, 2, 0.05), (72, 4, 1.0))
+    screen_keep: int = 96
+    field_steps: int = 6
 
     def __post_init__(self):
         tiers = tuple(self.tiers)
         object.__setattr__(self, "tiers", tiers)
         self._check("tiers", len(tiers) > 0 and all(isinstance(t, Tier) for t in tiers), "a non-empty tuple of Tier")
         for name in ("budget", "coarse_points", "cheap_steps", "screen", "refine", "iterations", "polish",
-                     "polish_iterations", "candidates"):
+                     "polish_iterations", "candidates", "field_steps"):
             value = getattr(self, name)
             self._check(name, isinstance(value, (int, np.integer)) and value >= (0 if name == "polish" else 1),
                         "a whole number >= 1")
@@ -130,6 +142,13 @@ class FastConfig(Config):
         for name in ("spread", "ratio", "umbilic", "floor", "within", "tolerance"):
             self._check(name, np.isfinite(getattr(self, name)) and getattr(self, name) > 0, "a positive number")
         self._check("ratio", self.ratio >= 1.0, "at least 1")
+        stages = tuple((int(r), int(p), float(f)) for r, p, f in self.screen_stages)
+        object.__setattr__(self, "screen_stages", stages)
+        self._check("screen_stages", len(stages) > 0 and all(r >= 1 and p >= 2 and 0 < f <= 1 for r, p, f in stages),
+                    "a non-empty tuple of (rotations >= 1, points a curve >= 2, share kept in (0, 1])")
+        self._check("screen_step", np.isfinite(self.screen_step) and self.screen_step > 0, "a positive number")
+        self._check("screen_keep", isinstance(self.screen_keep, (int, np.integer)) and self.screen_keep >= 1,
+                    "a whole number >= 1")
 
 
 # ---------------------------------------------------------------------- the search
@@ -138,10 +157,22 @@ def _error(r: Registration | None) -> float:
     return r.error / r.scale if r is not None and r.ok else np.inf
 
 
-def _tier_cost(config: FastConfig, k: int, signs: int, places: int, curves: int = 3) -> int:
+def _tier_cost(config: FastConfig, k: int, signs: int, places: int, curves: int = 3, context: int = 0) -> int:
     """About how many closest-point queries tier ``k`` costs on one model with ``places`` places, a
-    pose scored on ``curves`` curves."""
+    pose scored on ``curves`` curves of the touch (the field's screen also on one point of each of
+    ``context`` curves of other touches)."""
     tier = config.tiers[k]
+    if tier.rotations == "field":
+        start, stop = _span(config.tiers, k)
+        lookups, alive = 0, max(0, min(places, stop if stop is not None else places) - start)
+        for rotations, per_curve, share in config.screen_stages:
+            lookups += alive * rotations * (per_curve * curves + context)
+            alive = min(alive, max(config.screen_keep, int(np.ceil(share * alive))))
+        lookups += config.screen_keep * (config.field_steps + 1) * 3 * config.coarse_points * curves
+        exact = 2 * config.refine * config.coarse_points * curves
+        refine = config.refine * config.iterations * curves * 3 * config.coarse_points
+        # twice: a contact on a feature is screened with two data normals (engine.screen.data_normals)
+        return int(2 * signs * (lookups * LOOKUP_COST + exact) + refine)
     start, stop = _span(config.tiers, k)
     count = max(0, min(places, stop if stop is not None else places) - start)
     poses = count * signs * (2 if tier.rotations == "frames" else 12) * (5 if tier.tilt > 0 else 1)
@@ -244,6 +275,8 @@ class FastMethod:
         for i, found in zip(others, runner.map(_closed_form, others, touch, config)):
             state.best[i], work = found["registration"], work + found["queries"]
         signs = len(touch.orientations)
+        share = len(touch.points) / len(touch.joint_points)
+        polish = config.polish * config.polish_iterations * len(touch.points)        # the final polish's work
         allowed = config.budget * len(chosen) * signs
         allowed = allowed if budget is None else min(allowed, budget)
         while True:
@@ -256,8 +289,11 @@ class FastMethod:
                 break
             k = state.next[group[0]]
             group = [i for i in group if state.next[i] == k]
-            cost = sum(_tier_cost(config, k, signs, state.sizes[i], len(touch.curves)) for i in group)
-            if work > 0 and work + cost > allowed:
+            cost = sum(_tier_cost(config, k, signs, state.sizes[i], len(touch.curves), len(touch.context))
+                       for i in group)
+            # the budget bounds the poses tried: work on other touches' points (a context) counts as
+            # the touch's own share of the points scored, as a round's cost is counted
+            if work > 0 and work * share + cost + polish > allowed:
                 break
             depth = max(depth, k + 1)
             work += self._tier(state, group, k, runner)
@@ -277,7 +313,7 @@ class FastMethod:
             state.tried[i] += c.get("places", 0)
             if "rejected" in c:
                 state.rejected[i] = c["rejected"]
-            else:
+            elif "score" in c:
                 state.cheapest[i] = min(state.cheapest[i], float(c["score"][0]))
         _, e1 = state.leader()
         c_best = min((float(c["score"][0]) for c in cheap.values() if "score" in c), default=np.inf)

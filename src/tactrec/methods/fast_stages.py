@@ -11,6 +11,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..engine.kernels import field_refine
+from ..engine.screen import DISTINCT, LOOKUP_COST, data_normals, screen, screen_places
 from ..linalg import stable_order
 from ..registration import closedform_fast, mesh_fast
 from ..registration.result import Registration
@@ -25,7 +27,7 @@ def _places(held, index: int, touch, sign: int, config: FastConfig, every: bool)
     """The model's places in order for this touch and normal, computed once per touch."""
     key = (touch.key, index, sign, every)
     if key not in held.cache:
-        if len(held.cache) > 4 * len(held.entries) + 8:           # another touch: forget the last one's
+        if len(held.cache) > 8 * len(held.entries) + 8:           # another touch: forget the last one's
             held.cache.clear()
         model = held.entries[index].model
         g = touch.oriented(sign)
@@ -34,6 +36,16 @@ def _places(held, index: int, touch, sign: int, config: FastConfig, every: bool)
             field = model.fine_curvatures
             chosen = stable_order(np.hypot(field.k1 - fit[0][0], field.k2 - fit[0][1]))
         held.cache[key] = (chosen, fit)
+    return held.cache[key]
+
+
+def _screen_places(held, index: int, touch, sign: int, config: FastConfig) -> np.ndarray:
+    """The places the field screen takes, in order of curvature gap
+    (:func:`tactrec.engine.screen.screen_places`), computed once per touch."""
+    key = (touch.key, index, sign, "screen")
+    if key not in held.cache:
+        chosen, _ = _places(held, index, touch, sign, config, True)
+        held.cache[key] = screen_places(held.entries[index].model, chosen, touch.radius, step=config.screen_step)
     return held.cache[key]
 
 
@@ -56,9 +68,29 @@ def _cheap(held, indices, touch, config: FastConfig, k: int) -> list[dict]:
             out.append({"rejected": "the touch is larger than the model", "queries": 0})
             continue
         x, screened = t.joint_subset(config.coarse_points), t.screen_subset(config.coarse_points)
+        context_middles = screened[len(t.subset(config.coarse_points)):] if t.context else None
         poses, queries, tried = [], 0, 0
         for sign, g in zip((1, -1), t.orientations):
             chosen, fit = _places(held, index, t, sign, config, tier.places is None)
+            if tier.rotations == "field":
+                start, stop = _span(config.tiers, k)
+                spots = _screen_places(held, index, t, sign, config)[start:stop]
+                if len(spots) == 0:
+                    continue
+                for dn in data_normals(g, fit[2], distinct=DISTINCT):
+                    found = screen(model, g, spots, model.fine_curvatures.normal[spots], t.curves, dn,
+                                   stages=config.screen_stages, keep=config.screen_keep, extra=context_middles)
+                    tried += len(found.owner)
+                    x3 = t.joint_subset(3 * config.coarse_points)
+                    R, tr, grid = field_refine(*model.distance_field.args(), found.R, found.t, x3,
+                                               config.field_steps)
+                    queries += (found.lookups + len(R) * len(x3) * (config.field_steps + 1)) * LOOKUP_COST
+                    best = stable_order(grid)[:2 * config.refine]
+                    R, tr, score, q = mesh_fast.refine(model, R[best], tr[best], x, iterations=1, predict=True,
+                                                       tolerance=config.tolerance)
+                    queries += q
+                    poses.append((R, tr, score, np.full(len(R), sign)))
+                continue
             start, stop = _span(config.tiers, k)
             for lo in range(start, len(chosen) if stop is None else min(stop, len(chosen)), 1000):
                 part = chosen[lo:min(lo + 1000, len(chosen) if stop is None else stop)]
@@ -77,13 +109,16 @@ def _cheap(held, indices, touch, config: FastConfig, k: int) -> list[dict]:
                 order = np.lexsort((stable_order(score).argsort(), owner))          # each place's best rotation
                 best = order[np.r_[True, owner[order][1:] != owner[order][:-1]]]
                 poses.append((R[best], tr[best], score[best], np.full(len(best), sign)))
+        if not poses and tier.rotations == "field":          # every place screened by earlier tiers
+            out.append({"queries": int(queries), "places": tried})
+            continue
         if not poses:
             out.append({"rejected": "no place to start from", "queries": queries, "places": tried})
             continue
         R, tr, score, signs = (np.concatenate([p[i] for p in poses]) for i in range(4))
         keep = stable_order(score)[:config.refine]
         out.append({"R": R[keep], "t": tr[keep], "score": score[keep] / t.scale, "sign": signs[keep],
-                    "queries": queries, "places": tried})
+                    "queries": int(queries), "places": tried})
     return out
 
 

@@ -1,0 +1,131 @@
+"""The engine's breadth generator: every place of a mesh at every rotation, screened on its distance field.
+
+A hypothesis puts the touch's contact on a place of the model (a vertex,
+the best of each grid cell ``step x radius`` across, so that places lie
+about as far apart as a rotation step moves the curves' ends), the data's
+fitted normal onto the place's fitted normal (both paraboloid fits at one
+scale, :func:`tactrec.registration.mesh_fast.data_curvatures`), and turns the
+data about it in ``rotations`` equal steps.  Each hypothesis is scored by
+the mean truncated distance of a few points of each curve
+(:func:`tactrec.engine.kernels.field_scores`, about fifty times cheaper than
+an exact query); the best ``keep`` go on to exact steps.  Places come in
+the order of their curvature gap to the data, so a caller may screen them a
+part at a time, most likely first.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from ..linalg import compose, rotate, stable_order
+from ..registration.result import local_frame
+from ..surfaces.mesh_curvature import tangents
+from .kernels import field_scores, screen_rotations
+
+__all__ = ["Screen", "screen", "screen_places", "data_normals", "LOOKUP_COST", "DISTINCT"]
+
+#: data normals closer than this (degrees) pose the data alike: the refinement reaches across it
+DISTINCT = 10.0
+
+#: one field lookup, in closest-point queries (the budget's unit): measured 1.2 M queries and
+#: 50-100 M lookups a second on this package's benchmark machine
+LOOKUP_COST = 1.0 / 50.0
+
+
+@dataclasses.dataclass(frozen=True)
+class Screen:
+    """The best hypotheses of a screen: poses ``R (k, 3, 3), t (k, 3)`` (data onto model), their
+    field scores ``(k,)``, the place each belongs to (an index into the places screened) and the
+    lookups spent."""
+
+    R: np.ndarray
+    t: np.ndarray
+    score: np.ndarray
+    owner: np.ndarray
+    lookups: int
+
+
+def screen_places(model, gap_order: np.ndarray, radius: float, *, step: float) -> np.ndarray:
+    """The places to screen: of the vertices in the order ``gap_order`` (best curvature match first),
+    the first of each grid cell ``step x radius`` across, in that order."""
+    low, size = model.bounds[0], max(step * radius, 1e-12)
+    span = np.floor((model.bounds[1] - low) / size).astype(np.int64) + 1
+    cell = np.floor((model.vertices[gap_order] - low) / size).astype(np.int64)
+    _, first = np.unique((cell[:, 0] * span[1] + cell[:, 1]) * span[2] + cell[:, 2], return_index=True)
+    return gap_order[np.sort(first)]
+
+
+def _best_places(scores: np.ndarray, keep: int) -> np.ndarray:
+    """Indices of the ``keep`` places (rows) whose best rotation scores least, best first (ties at
+    the cut kept and ordered by index: :func:`tactrec.linalg.stable_order`)."""
+    best = scores.min(axis=1).astype(np.float64)
+    k = min(keep, len(best))
+    part = np.arange(len(best))
+    if k < len(best):
+        part = np.argpartition(best, k - 1)[:k]
+        part = np.flatnonzero(best <= best[part].max())
+    return part[stable_order(best[part])][:k]
+
+
+def _ends(curves, per_curve: int) -> np.ndarray:
+    """``per_curve`` points of each curve, evenly spread along it without its middle (the contact,
+    which every hypothesis puts on the surface): ``(k * per_curve, 3)``."""
+    out = []
+    for c in curves:
+        c = np.asarray(c, dtype=np.float64)
+        at = np.linspace(0, len(c) - 1, per_curve + 1 if per_curve % 2 else per_curve)
+        if per_curve % 2:
+            at = np.delete(at, len(at) // 2)
+        out.append(c[np.unique(at.round().astype(int))])
+    return np.concatenate(out)
+
+
+def data_normals(geometry, fitted: np.ndarray, *, distinct: float) -> list[np.ndarray]:
+    """The data normals a touch is screened with: the fitted one (a paraboloid fit, as the model's
+    places are fitted) and the curves' own (eq. 1) where they differ by more than ``distinct``
+    degrees (a contact on a feature, where a fit at the paraboloid's scale smooths it away)."""
+    out = [np.asarray(fitted, dtype=np.float64)]
+    if float(np.dot(geometry.normal, fitted)) < np.cos(np.deg2rad(distinct)):
+        out.append(np.asarray(geometry.normal, dtype=np.float64))
+    return out
+
+
+def screen(model, geometry, vertices: np.ndarray, normals: np.ndarray, curves, normal: np.ndarray, *, stages,
+           keep: int, extra: np.ndarray | None = None) -> Screen:
+    """Screen the data ``curves`` (data frame) at the spots ``vertices (n,)``, ``normals (n, 3)`` of a
+    mesh model: the data ``normal (3,)`` onto the spot's normal, ``geometry.contact`` onto the
+    vertex, turned about it.  ``stages``, coarse to fine, are ``(rotations, points a curve, share
+    kept)``: each scores the spots the last kept at ``rotations`` equal turns on that many points
+    of each curve (:func:`_ends`) and keeps that share of them (at least ``keep``); the last
+    stage's best ``keep`` spots go on, each at its best turn, ordered by score (near-equal scores
+    by index: :func:`tactrec.linalg.stable_order`).  ``owner`` indexes the spots.  ``extra (k, 3)``:
+    points scored at every stage besides the curves' (a session's other touches, one point a
+    curve: the screen then costs about what the touch alone costs)."""
+    field = model.distance_field
+    L0 = local_frame(normal, geometry.tangents[0])                                      # rows t1, t2, N
+    d1, d2 = tangents(normals)
+    frames_all = np.ascontiguousarray(np.stack([d1, d2, normals], axis=2))              # (n, 3, 3) columns
+    alive = np.arange(len(vertices))
+    lookups = 0
+    for k, (rotations, per_curve, share) in enumerate(stages):
+        frames = np.ascontiguousarray(frames_all[alive])
+        points = _ends(curves, per_curve) if extra is None else np.concatenate([_ends(curves, per_curve), extra])
+        local = np.ascontiguousarray((points - geometry.contact) @ L0.T)
+        turned = screen_rotations(local, rotations)
+        scores = field_scores(*field.args(), frames, np.ascontiguousarray(model.vertices[vertices[alive]]), turned)
+        lookups += scores.size * len(local)
+        last = k == len(stages) - 1
+        chosen = _best_places(scores, keep if last else max(keep, int(np.ceil(share * len(alive)))))
+        if not last:
+            alive = alive[chosen]
+    turn = np.argmin(scores[chosen], axis=1)
+    score = scores[chosen, turn].astype(np.float64)
+    angle = 2.0 * np.pi * turn / rotations
+    c, s = np.cos(angle), np.sin(angle)
+    Rz = np.zeros((len(chosen), 3, 3))
+    Rz[:, 0, 0], Rz[:, 0, 1], Rz[:, 1, 0], Rz[:, 1, 1], Rz[:, 2, 2] = c, -s, s, c, 1.0
+    R = compose(compose(frames[chosen], Rz), L0[None])
+    t = model.vertices[vertices[alive[chosen]]] - rotate(R, geometry.contact)
+    return Screen(R, t, score, alive[chosen], int(lookups))
