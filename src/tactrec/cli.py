@@ -222,6 +222,11 @@ def _known(values: list, known, what: str, option: str, name: str) -> tuple:
     return tuple(values)
 
 
+#: the benchmarks that take ``--scans``, and which kinds each takes
+SCAN_KINDS = {**{name: ("shipped", "paper-like") for name in ("paper-fig11", "paper-table6", "paper-steps")},
+              **{name: ("shipped", "other") for name in ("fast-vs-paper", "fit-limit", "field")}}
+
+
 def cmd_bench(args) -> int:
     from .bench import BENCHMARKS
 
@@ -229,8 +234,12 @@ def cmd_bench(args) -> int:
         raise InputError(f"unknown benchmark; available: {', '.join(sorted(BENCHMARKS))}", args.name)
     out = Path(args.out) if args.out else Path("bench-out")
     extra = {}
-    if args.scans is not None and args.name not in ("paper-fig11", "paper-table6", "paper-steps"):
-        raise InputError("--scans applies to paper-fig11, paper-table6 and paper-steps only", args.name)
+    if args.scans is not None:
+        kinds = SCAN_KINDS.get(args.name)
+        if kinds is None:
+            raise InputError(f"--scans applies to {', '.join(SCAN_KINDS)} only", args.name)
+        if args.scans not in kinds:
+            raise InputError(f"{args.name} takes --scans {' or '.join(kinds)}, not {args.scans}", args.name)
     for option, value in (("--delta-only", args.delta_only or None), ("--lengths", args.lengths),
                           ("--angles", args.angles)):
         if value is not None and args.name != "paper-fig11":
@@ -370,9 +379,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--jobs", type=_count(1), default=None, help="worker processes (default: up to 2)")
     p.add_argument("--method", choices=sorted(METHODS), default="paper",
                    help="method of the paper-* reproductions (default paper)")
-    p.add_argument("--scans", choices=("shipped", "paper-like"), default=None,
+    p.add_argument("--scans", choices=("shipped", "paper-like", "other"), default=None,
                    help="paper-fig11, paper-table6, paper-steps: the YCB scans as shipped (paper-steps: paper-like), "
-                        "or scaled to 60-95 mm and Loop-subdivided to the paper's resolution")
+                        "or scaled to 60-95 mm and Loop-subdivided to the paper's resolution; fast-vs-paper, "
+                        "fit-limit, field: 'other' for 14 free-form meshes from other sources (fetched once)")
     p.add_argument("--delta-only", action="store_true",
                    help="paper-fig11: only the delta sweep (one recognition per touch), l and phi at the defaults")
     p.add_argument("--lengths", type=_positives, default=None, metavar="MM,...",

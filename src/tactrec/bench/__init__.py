@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import Callable
 
-from . import (baselines, calibration, cold_start, fast_vs_paper, fit_limit, kernels, multi_touch, paper_closedform,
+from . import (baselines, calibration, cold_start, fast_vs_paper, field, fit_limit, kernels, multi_touch, paper_closedform,
                paper_example, paper_fig11, paper_mesh, paper_steps, paper_table5, paper_table6, scale, search_limits)
 
 __all__ = ["BENCHMARKS"]
@@ -33,4 +33,5 @@ BENCHMARKS: dict[str, Callable[..., dict]] = {
     "search-limits": search_limits.run,
     "calibration": calibration.run,
     "multi-touch": multi_touch.run,
+    "field": field.run,
 }

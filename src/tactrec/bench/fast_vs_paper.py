@@ -52,7 +52,9 @@ _DB = {}
 
 def _database(models: tuple[str, ...]):
     if models not in _DB:
-        db = build_entries(models)
+        from .other_scans import OTHER, other_database
+
+        db = other_database(models) if set(models) <= set(OTHER) else build_entries(models)
         for entry in db.entries:                 # one-off per model, not charged to a recognition
             mesh_fast.prepare(entry.model)
         _DB[models] = db
@@ -107,6 +109,19 @@ def _touch(task):
     return {"model": entry.name, "protocol": protocol, "instance": instance, "site": site, "results": results}
 
 
+def scan_set(models, scans: str | None, bench: str) -> tuple[tuple[str, ...], str]:
+    """The models a bench on the fast-vs-paper touches runs on (the ten YCB scans of Fig. 11 unless
+    given, or with ``scans="other"`` the meshes of :mod:`tactrec.bench.other_scans`) and the name of
+    its output files."""
+    if scans == "other":
+        from .other_scans import OTHER
+
+        return tuple(models or OTHER), f"{bench}-other"
+    if scans not in (None, "shipped"):
+        raise InputError(f"{bench} runs on the shipped scans or on 'other' ones, not {scans!r}", "--scans")
+    return tuple(models or BUILTIN_SETS["paper-fig11"]), bench
+
+
 def _code_hash() -> str:
     """Hash of the sources a record depends on."""
     return sources_hash(*CORE_SOURCES, "bench/fast_vs_paper.py")
@@ -137,17 +152,20 @@ def _summary(records: list[dict], protocol: str, method: str) -> dict:
 
 
 def run(*, out, instances: int = 10, seed: int = 0, jobs: int | None = None, quiet: bool = False,
-        models: tuple[str, ...] | None = None, protocols=tuple(PROTOCOLS), methods=METHODS, **_ignored) -> dict:
-    """Run both methods on the same touches; write ``fast-vs-paper.json``, ``.md`` and ``.png``."""
+        models: tuple[str, ...] | None = None, protocols=tuple(PROTOCOLS), methods=METHODS, scans: str | None = None,
+        **_ignored) -> dict:
+    """Run both methods on the same touches; write ``fast-vs-paper.json``, ``.md`` and ``.png`` (with
+    ``scans="other"``, on the meshes of :mod:`tactrec.bench.other_scans`: ``fast-vs-paper-other.*``)."""
     out = Path(out)
-    models = tuple(models or BUILTIN_SETS["paper-fig11"])
+    models, name = scan_set(models, scans, "fast-vs-paper")
     tasks = [(models, m, i, seed, p, tuple(methods)) for p in protocols for m in range(len(models))
              for i in range(instances)]
     parts = out / "fast-vs-paper.parts" / _code_hash()
     parts.mkdir(parents=True, exist_ok=True)
     records = run_parallel(_touch_saved, [(t, parts) for t in tasks], jobs=jobs or 1, quiet=quiet,
                            desc="fast-vs-paper")
-    table = {"benchmark": "fast-vs-paper", "instances": instances, "seed": seed, "models": list(models),
+    table = {"benchmark": "fast-vs-paper", "scans": scans or "shipped", "instances": instances, "seed": seed,
+             "models": list(models),
              "protocols": {p: PROTOCOLS[p] for p in protocols}, "paper_p3": PAPER,
              "summary": {p: {m: _summary(records, p, m) for m in methods} for p in protocols}}
     for p in protocols:
@@ -156,16 +174,17 @@ def run(*, out, instances: int = 10, seed: int = 0, jobs: int | None = None, qui
             s["speedup_of_medians"] = s["paper"]["median_seconds"] / s["fast"]["median_seconds"]
     table["records"] = records
     out.mkdir(parents=True, exist_ok=True)
-    write_json(out / "fast-vs-paper.json", table)
+    write_json(out / f"{name}.json", table)
     markdown = _markdown(table)
-    (out / "fast-vs-paper.md").write_text(markdown, encoding="utf-8")
-    table["plots"] = [str(_plot(table, out))]
+    (out / f"{name}.md").write_text(markdown, encoding="utf-8")
+    table["plots"] = [str(_plot(table, out, name))]
     table["text"] = markdown
     return table
 
 
 def _markdown(table: dict) -> str:
-    lines = [f"{len(table['models'])} YCB scans, {table['instances']} touches each per protocol (seed "
+    kind = "meshes from other sources" if table.get("scans") == "other" else "YCB scans"
+    lines = [f"{len(table['models'])} {kind}, {table['instances']} touches each per protocol (seed "
              f"{table['seed']}); both methods on the same touches.", "",
              "| protocol | method | success | median s | p95 s | max s | mean s | median contact error (mm) |",
              "|---|---|---|---|---|---|---|---|"]
@@ -183,7 +202,7 @@ def _markdown(table: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _plot(table, out: Path) -> Path:
+def _plot(table, out: Path, name: str = "fast-vs-paper") -> Path:
     from ..plots import _plt, save_figure
 
     plt = _plt()
@@ -211,6 +230,6 @@ def _plot(table, out: Path) -> Path:
     axes[1].set_ylabel("seconds per recognition (10 models)")
     fig.suptitle("fast vs paper, same touches")
     fig.tight_layout()
-    path = out / "fast-vs-paper.png"
+    path = out / f"{name}.png"
     save_figure(fig, path)
     return path

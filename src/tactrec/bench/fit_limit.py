@@ -39,10 +39,9 @@ import numpy as np
 from ..io.atomic import write_text_atomic
 from ..registration import mesh_fast
 from ..registration.result import apply_poses
-from ..surfaces import BUILTIN_SETS
 from ..units import conversion
 from .common import CORE_SOURCES, recognizer, run_parallel, saved_record, sources_hash, write_json
-from .fast_vs_paper import PROTOCOLS, _database, _simulate
+from .fast_vs_paper import PROTOCOLS, _database, _simulate, scan_set
 
 __all__ = ["run"]
 
@@ -126,22 +125,25 @@ def _summary(rows: list[dict]) -> dict:
 
 
 def run(*, out, instances: int = 10, seed: int = 0, jobs: int | None = None, quiet: bool = False,
-        models: tuple[str, ...] | None = None, protocols=tuple(PROTOCOLS), **_ignored) -> dict:
-    """Classify ``fast``'s misses on the fast-vs-paper touches; write ``fit-limit.json`` and ``.md``."""
+        models: tuple[str, ...] | None = None, protocols=tuple(PROTOCOLS), scans: str | None = None,
+        **_ignored) -> dict:
+    """Classify ``fast``'s misses on the fast-vs-paper touches; write ``fit-limit.json`` and ``.md``
+    (with ``scans="other"``, on the meshes of :mod:`tactrec.bench.other_scans`: ``fit-limit-other.*``)."""
     out = Path(out)
-    models = tuple(models or BUILTIN_SETS["paper-fig11"])
+    models, name = scan_set(models, scans, "fit-limit")
     tasks = [(models, m, i, seed, p) for p in protocols for m in range(len(models)) for i in range(instances)]
     parts = out / "fit-limit.parts" / _code_hash()
     parts.mkdir(parents=True, exist_ok=True)
     records = run_parallel(_touch_saved, [(t, parts) for t in tasks], jobs=jobs or 1, quiet=quiet,
                            desc="fit-limit")
-    table = {"benchmark": "fit-limit", "instances": instances, "seed": seed, "models": list(models),
+    table = {"benchmark": "fit-limit", "scans": scans or "shipped", "instances": instances, "seed": seed, "models": list(models),
              "protocols": {p: PROTOCOLS[p] for p in protocols},
              "summary": {p: _summary([r for r in records if r["protocol"] == p]) for p in protocols},
              "records": records}
     out.mkdir(parents=True, exist_ok=True)
-    write_json(out / "fit-limit.json", table)
-    lines = [f"{len(models)} YCB scans, {instances} touches each per protocol (seed {seed}), method fast.", "",
+    write_json(out / f"{name}.json", table)
+    kind = "meshes from other sources" if scans == "other" else "YCB scans"
+    lines = [f"{len(models)} {kind}, {instances} touches each per protocol (seed {seed}), method fast.", "",
              "| protocol | success | outfitted | search misses | ceiling | misses within the noise | "
              "ceiling beyond the noise | misses flagged ambiguous | success when not flagged |",
              "|---|---|---|---|---|---|---|---|---|"]
@@ -153,5 +155,5 @@ def run(*, out, instances: int = 10, seed: int = 0, jobs: int | None = None, qui
                      f"{s['misses_within_noise']} of {s['misses']} | {s['clear_ceiling_percent']:.0f}% | "
                      f"{s['misses_flagged_ambiguous']} of {s['misses']} | {sure} |")
     table["text"] = "\n".join(lines) + "\n"
-    write_text_atomic(out / "fit-limit.md", table["text"])
+    write_text_atomic(out / f"{name}.md", table["text"])
     return table
