@@ -28,13 +28,14 @@ BRICK = 8
 
 
 @njit(cache=True, nogil=True)
-def _sample(index, bricks, origin, inv_h, quantum, truncation, x, y, z):
-    """Signed distance at one point by trilinear interpolation; ``truncation`` outside every brick."""
+def _cell(index, origin, inv_h, x, y, z):
+    """The brick of the cell holding one point and the point's place in it: ``(b, lx, ly, lz, fx, fy,
+    fz)``, ``b`` -1 outside every brick."""
     gx = (x - origin[0]) * inv_h
     gy = (y - origin[1]) * inv_h
     gz = (z - origin[2]) * inv_h
     if not (gx >= 0.0 and gy >= 0.0 and gz >= 0.0):          # also NaN
-        return truncation
+        return -1, 0, 0, 0, 0.0, 0.0, 0.0
     ix = int(gx)
     iy = int(gy)
     iz = int(gz)
@@ -42,16 +43,16 @@ def _sample(index, bricks, origin, inv_h, quantum, truncation, x, y, z):
     by = iy // BRICK
     bz = iz // BRICK
     if bx >= index.shape[0] or by >= index.shape[1] or bz >= index.shape[2]:
-        return truncation
-    b = index[bx, by, bz]
+        return -1, 0, 0, 0, 0.0, 0.0, 0.0
+    return index[bx, by, bz], ix - bx * BRICK, iy - by * BRICK, iz - bz * BRICK, gx - ix, gy - iy, gz - iz
+
+
+@njit(cache=True, nogil=True)
+def _sample(index, bricks, origin, inv_h, quantum, truncation, x, y, z):
+    """Signed distance at one point by trilinear interpolation; ``truncation`` outside every brick."""
+    b, lx, ly, lz, fx, fy, fz = _cell(index, origin, inv_h, x, y, z)
     if b < 0:
         return truncation
-    lx = ix - bx * BRICK
-    ly = iy - by * BRICK
-    lz = iz - bz * BRICK
-    fx = gx - ix
-    fy = gy - iy
-    fz = gz - iz
     c = bricks[b]
     c00 = c[lx, ly, lz] * (1.0 - fx) + c[lx + 1, ly, lz] * fx
     c10 = c[lx, ly + 1, lz] * (1.0 - fx) + c[lx + 1, ly + 1, lz] * fx
@@ -68,28 +69,9 @@ def _sample_gradient(index, bricks, origin, inv_h, quantum, truncation, x, y, z,
     out[0] = 0.0
     out[1] = 0.0
     out[2] = 0.0
-    gx = (x - origin[0]) * inv_h
-    gy = (y - origin[1]) * inv_h
-    gz = (z - origin[2]) * inv_h
-    if not (gx >= 0.0 and gy >= 0.0 and gz >= 0.0):
-        return truncation
-    ix = int(gx)
-    iy = int(gy)
-    iz = int(gz)
-    bx = ix // BRICK
-    by = iy // BRICK
-    bz = iz // BRICK
-    if bx >= index.shape[0] or by >= index.shape[1] or bz >= index.shape[2]:
-        return truncation
-    b = index[bx, by, bz]
+    b, lx, ly, lz, fx, fy, fz = _cell(index, origin, inv_h, x, y, z)
     if b < 0:
         return truncation
-    lx = ix - bx * BRICK
-    ly = iy - by * BRICK
-    lz = iz - bz * BRICK
-    fx = gx - ix
-    fy = gy - iy
-    fz = gz - iz
     c = bricks[b]
     v000 = float(c[lx, ly, lz])
     v100 = float(c[lx + 1, ly, lz])
