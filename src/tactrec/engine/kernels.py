@@ -16,6 +16,8 @@ from __future__ import annotations
 import numpy as np
 from numba import config, njit, prange
 
+from . import BRICK
+
 if config.THREADING_LAYER == "default":
     # the built-in scheduler: always there, and safe in a process forked after a kernel ran (a
     # Recognizer's workers); GNU OpenMP, numba's other default, ends such a process
@@ -23,8 +25,6 @@ if config.THREADING_LAYER == "default":
 
 __all__ = ["BRICK", "field_lookup", "field_gradient", "screen_rotations", "field_scores", "field_refine"]
 
-#: cells along a brick's edge (a brick stores BRICK + 1 samples a side, so that no lookup crosses bricks)
-BRICK = 8
 
 
 @njit(cache=True, nogil=True)

@@ -22,6 +22,7 @@ import numpy as np
 from ..linalg import compose, rotate, stable_order
 from ..registration.result import local_frame
 from ..surfaces.mesh_curvature import tangents
+from . import LOOKUP_COST  # noqa: F401  (re-exported: a screen's cost in queries)
 from .kernels import field_scores, screen_rotations
 
 __all__ = ["Screen", "screen", "screen_places", "data_normals", "LOOKUP_COST", "DISTINCT"]
@@ -29,9 +30,6 @@ __all__ = ["Screen", "screen", "screen_places", "data_normals", "LOOKUP_COST", "
 #: data normals closer than this (degrees) pose the data alike: the refinement reaches across it
 DISTINCT = 10.0
 
-#: one field lookup, in closest-point queries (the budget's unit): measured 1.2 M queries and
-#: 50-100 M lookups a second on this package's benchmark machine
-LOOKUP_COST = 1.0 / 50.0
 
 
 @dataclasses.dataclass(frozen=True)

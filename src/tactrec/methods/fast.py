@@ -67,7 +67,7 @@ import dataclasses
 
 import numpy as np
 
-from ..engine.screen import LOOKUP_COST
+from ..engine import LOOKUP_COST
 from ..linalg import clearly_less
 from ..probability import fit_limit, fit_standard_error
 from ..registration import closedform_fast, mesh_fast

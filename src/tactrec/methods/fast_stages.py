@@ -11,8 +11,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..engine.kernels import field_refine
-from ..engine.screen import DISTINCT, LOOKUP_COST, data_normals, screen, screen_places
+from ..engine import LOOKUP_COST
 from ..linalg import stable_order
 from ..registration import closedform_fast, mesh_fast
 from ..registration.result import Registration
@@ -45,6 +44,8 @@ def _screen_places(held, index: int, touch, sign: int, config: FastConfig) -> np
     key = (touch.key, index, sign, "screen")
     if key not in held.cache:
         chosen, _ = _places(held, index, touch, sign, config, True)
+        from ..engine.screen import screen_places
+
         held.cache[key] = screen_places(held.entries[index].model, chosen, touch.radius, step=config.screen_step)
     return held.cache[key]
 
@@ -73,6 +74,9 @@ def _cheap(held, indices, touch, config: FastConfig, k: int) -> list[dict]:
         for sign, g in zip((1, -1), t.orientations):
             chosen, fit = _places(held, index, t, sign, config, tier.places is None)
             if tier.rotations == "field":
+                from ..engine.kernels import field_refine            # numba: only once a search needs it
+                from ..engine.screen import DISTINCT, data_normals, screen
+
                 start, stop = _span(config.tiers, k)
                 spots = _screen_places(held, index, t, sign, config)[start:stop]
                 if len(spots) == 0:

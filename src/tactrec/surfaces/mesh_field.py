@@ -96,7 +96,7 @@ class DistanceField:
 
     @classmethod
     def from_store(cls, arrays) -> "DistanceField":
-        from ..engine.kernels import BRICK
+        from ..engine import BRICK
 
         origin = np.ascontiguousarray(arrays["field_origin"], dtype=np.float64)
         spacing, truncation = float(arrays["field_spacing"]), float(arrays["field_truncation"])
@@ -136,7 +136,7 @@ def build_field(vertices: np.ndarray, faces: np.ndarray, *, mean_edge: float, sp
     ``SPACING x mean_edge`` unless given."""
     import igl
 
-    from ..engine.kernels import BRICK
+    from ..engine import BRICK
 
     h = float(spacing if spacing is not None else SPACING * mean_edge)
     truncation = band * h
