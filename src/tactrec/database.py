@@ -184,6 +184,55 @@ def load_database(path: str | os.PathLike, *, warn=None) -> Database:
     return Database(entries, db)
 
 
+def _stored_blob(model) -> tuple[bytes, int]:
+    """A model's database file (its arrays and its table, compressed) and its table's rows."""
+    entry = _entry(model)
+    arrays = dict(model.to_store(), **entry.table.to_arrays())
+    buffer = io.BytesIO()
+    np.savez_compressed(buffer, **arrays)
+    return buffer.getvalue(), len(entry.table)
+
+
+def _start_builder(models: list) -> None:
+    _BUILDER[:] = [models]
+
+
+def _stored_in_worker(k: int) -> tuple[bytes, int]:
+    return _stored_blob(_BUILDER[0][k])
+
+
+#: in a build's worker process only: the models it was forked with (set by the pool's initializer)
+_BUILDER: list = []
+
+
+def _stored(models: list, todo: list[int], *, quiet: bool) -> list[tuple[bytes, int]]:
+    """:func:`_stored_blob` of ``models[k]`` for each ``k`` of ``todo``, in order: in two forked
+    worker processes when there are two or more (a scan's distance field and tables take a second or
+    two each), else here."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    bar = _progress(range(len(todo)), total=len(todo), desc="building", quiet=quiet)
+    jobs = min(2, os.cpu_count() or 1, len(todo))
+    # not from inside another process's worker (a benchmark's): that pool already uses the cores
+    nested = multiprocessing.parent_process() is not None
+    if jobs < 2 or nested or "fork" not in multiprocessing.get_all_start_methods():
+        out = []
+        for k in todo:
+            out.append(_stored_blob(models[k]))
+            bar.update()
+        bar.close()
+        return out
+    with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("fork"), initializer=_start_builder,
+                             initargs=(models,)) as pool:
+        out = []
+        for found in pool.map(_stored_in_worker, todo):
+            out.append(found)
+            bar.update()
+    bar.close()
+    return out
+
+
 def build_database(models: Iterable, out: str | os.PathLike, *, quiet: bool = False, units: str | None = None,
                    scale: float | None = None) -> BuildReport:
     """Build (or update) the database ``out`` from model files or built-in names.
@@ -208,31 +257,32 @@ def build_database(models: Iterable, out: str | os.PathLike, *, quiet: bool = Fa
     items, built, reused = [], [], []
     models = [load_model(src, units=units, scale=scale) for src in sources]  # all checked before any write
     _check_unique([model.name for model in models], [src.path for src in sources])
-    for src, model in _progress(zip(sources, models), total=len(sources), desc="building", quiet=quiet):
-        path = src.path
-        sha = file_sha256(path)
+    plans = []
+    for src, model in zip(sources, models):
+        sha = file_sha256(src.path)
         options = {"units": units if units is not None else src.units,
                    "scale": scale if scale is not None else src.scale} if model.kind == "mesh" else {}
         prev = old.get(model.name)
-        if (prev and prev["source_sha256"] == sha and prev.get("table_version") == TABLE_VERSION
-                and prev.get("options", {}) == options
-                and (out / prev["file"]).is_file()
-                and file_sha256(out / prev["file"]) == prev["file_sha256"]):
-            items.append(dict(prev, source=str(path)))
+        fresh = not (prev and prev["source_sha256"] == sha and prev.get("table_version") == TABLE_VERSION
+                     and prev.get("options", {}) == options
+                     and (out / prev["file"]).is_file()
+                     and file_sha256(out / prev["file"]) == prev["file_sha256"])
+        plans.append((src, model, sha, options, prev, fresh))
+    todo = [k for k, plan in enumerate(plans) if plan[5]]
+    blobs = dict(zip(todo, _stored(models, todo, quiet=quiet)))
+    for k, (src, model, sha, options, prev, fresh) in enumerate(plans):
+        if not fresh:
+            items.append(dict(prev, source=str(src.path)))
             reused.append(model.name)
             continue
-        entry = _entry(model)
-        arrays = dict(model.to_store(), **entry.table.to_arrays())
-        buffer = io.BytesIO()
-        np.savez_compressed(buffer, **arrays)
-        blob = buffer.getvalue()
+        blob, rows = blobs[k]
         name = f"{_safe(model.name)}-{sha[:16]}.npz"
         with atomic_write(out / name, "wb") as handle:
             handle.write(blob)
         items.append({
             "name": model.name, "kind": model.kind, "units": model.units, "options": options, "file": name,
-            "source": str(path), "source_sha256": sha, "file_sha256": hashlib.sha256(blob).hexdigest(),
-            "table_rows": len(entry.table), "table_version": TABLE_VERSION,
+            "source": str(src.path), "source_sha256": sha, "file_sha256": hashlib.sha256(blob).hexdigest(),
+            "table_rows": rows, "table_version": TABLE_VERSION,
             "builtin": src.builtin,
         })
         built.append(model.name)
