@@ -44,13 +44,14 @@ to chosen models (the budget counts those alone).  It also stops before a round 
 work (closest-point queries) past ``budget`` per model; such a search is
 reported as not settled (the budget counts per model and per normal tried:
 twice as much without an ``outward`` hint; a caller may give a lower one in
-all).  A field lookup counts as :data:`~tactrec.engine.screen.LOOKUP_COST`
+all).  A field lookup counts as :data:`~tactrec.engine.LOOKUP_COST`
 of a query, and the final polish is reserved.  A round's cost is counted on
 the touch's own curves, and the work on other touches' points at the
 touch's share of the points scored, so the budget bounds the poses tried: a
 search with other touches in its score (a session's) tries as many as the
 touch alone would and spends queries in proportion to the points it scores
-(on the first screens, about what the touch alone spends).  The best ``polish`` models then take
+(on the first screens, about what the touch alone spends).  The best
+``polish`` models then take
 ``polish_iterations`` more steps on all points.
 
 Every cut in a ranked list (screen, rotations, refinement) orders near-equal
