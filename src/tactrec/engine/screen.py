@@ -85,7 +85,7 @@ def data_normals(geometry, fitted: np.ndarray, *, distinct: float) -> list[np.nd
     places are fitted) and the curves' own (eq. 1) where they differ by more than ``distinct``
     degrees (a contact on a feature, where a fit at the paraboloid's scale smooths it away)."""
     out = [np.asarray(fitted, dtype=np.float64)]
-    if float(np.dot(geometry.normal, fitted)) < np.cos(np.deg2rad(distinct)):
+    if float(np.sum(geometry.normal * fitted)) < np.cos(np.deg2rad(distinct)):       # element-wise: no BLAS
         out.append(np.asarray(geometry.normal, dtype=np.float64))
     return out
 
@@ -110,7 +110,7 @@ def screen(model, geometry, vertices: np.ndarray, normals: np.ndarray, curves, n
     for k, (rotations, per_curve, share) in enumerate(stages):
         frames = np.ascontiguousarray(frames_all[alive])
         points = _ends(curves, per_curve) if extra is None else np.concatenate([_ends(curves, per_curve), extra])
-        local = np.ascontiguousarray((points - geometry.contact) @ L0.T)
+        local = np.ascontiguousarray(rotate(L0, points - geometry.contact))             # element-wise: no BLAS
         turned = screen_rotations(local, rotations)
         scores = field_scores(*field.args(), frames, np.ascontiguousarray(model.vertices[vertices[alive]]), turned)
         lookups += scores.size * len(local)
