@@ -48,11 +48,9 @@ class Screen:
 def screen_places(model, gap_order: np.ndarray, radius: float, *, step: float) -> np.ndarray:
     """The places to screen: of the vertices in the order ``gap_order`` (best curvature match first),
     the first of each grid cell ``step x radius`` across, in that order."""
-    low, size = model.bounds[0], max(step * radius, 1e-12)
-    span = np.floor((model.bounds[1] - low) / size).astype(np.int64) + 1
-    cell = np.floor((model.vertices[gap_order] - low) / size).astype(np.int64)
-    _, first = np.unique((cell[:, 0] * span[1] + cell[:, 1]) * span[2] + cell[:, 2], return_index=True)
-    return gap_order[np.sort(first)]
+    from ..registration.mesh_fast import first_per_cell
+
+    return first_per_cell(model, gap_order, max(step * radius, 1e-12))
 
 
 def _best_places(scores: np.ndarray, keep: int) -> np.ndarray:

@@ -32,7 +32,7 @@ from ..surfaces.mesh import MeshModel
 from ..surfaces.mesh_curvature import fitted_frame, quadric_curvatures, tangents
 from .result import Registration, cross, local_frame, point_to_plane_step, rotations_from_vectors, rotations_z
 
-__all__ = ["places", "frame_poses", "refine", "signed_distances", "mean_distance", "registration", "data_curvatures",
+__all__ = ["places", "first_per_cell", "frame_poses", "refine", "signed_distances", "mean_distance", "registration", "data_curvatures",
            "prepare", "starting_poses"]
 
 
@@ -132,13 +132,17 @@ def places(model: MeshModel, geometry: LocalGeometry, x: np.ndarray, radius: flo
     field = model.fine_curvatures
     dk, direction, normal = data_curvatures(geometry, x, field.radius)
     gap = np.hypot(field.k1 - dk[0], field.k2 - dk[1])
-    order = stable_order(gap)
-    low, size = model.bounds[0], radius / spread
+    chosen = first_per_cell(model, stable_order(gap), radius / spread)
+    return chosen, gap[chosen], (dk, direction, normal)
+
+
+def first_per_cell(model: MeshModel, order: np.ndarray, size: float) -> np.ndarray:
+    """Of the vertices ``order (n,)``, the first of each cell of a grid ``size`` across, in that order."""
+    low = model.bounds[0]
     span = np.floor((model.bounds[1] - low) / size).astype(np.int64) + 1
     cell = np.floor((model.vertices[order] - low) / size).astype(np.int64)
     _, first = np.unique((cell[:, 0] * span[1] + cell[:, 1]) * span[2] + cell[:, 2], return_index=True)
-    chosen = order[np.sort(first)]
-    return chosen, gap[chosen], (dk, direction, normal)
+    return order[np.sort(first)]
 
 
 #: the normal tilted four ways (rotation vectors about the frame's first two axes, per radian)
