@@ -20,7 +20,8 @@ from tactrec.methods import DEFAULT_METHOD
 from tactrec.recognition import ModelEntry, Recognizer, recognize
 from tactrec.registration import closedform_fast, mesh_fast
 from tactrec.registration.result import rotations_from_vectors
-from tactrec.simulation import simulate_random_touch, simulate_touch, spread_vertices
+from tactrec.registration.solver import Criteria, mean_distance, solve
+from tactrec.simulation import simulate_random_touch, simulate_touch
 from tactrec.surfaces import load_model
 from tactrec.surfaces.mesh import MeshModel
 from tactrec.tables import CurvatureTable
@@ -90,8 +91,8 @@ def test_gauss_newton_converges_from_perturbed_poses(scans):
     tilt = rotations_from_vectors(np.deg2rad(5.0) * axes / np.linalg.norm(axes, axis=1)[:, None])
     R0 = tilt @ R
     t0 = t + rng.normal(size=(20, 3)) / np.sqrt(3.0)
-    before = mesh_fast.mean_distance(m, R0, t0, touch.points)
-    _, _, after, _ = mesh_fast.refine(m, R0, t0, touch.points, iterations=20)
+    before = mean_distance(m, R0, t0, touch.points)
+    _, _, after, _ = solve(m, R0, t0, touch.points, Criteria(20))
     assert np.min(before) > 0.1 and np.sum(after < 0.005) >= 18
 
 

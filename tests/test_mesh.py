@@ -10,6 +10,7 @@ from tactrec.cli import main
 from tactrec.database import load_database
 from tactrec.errors import InputError
 from tactrec.surfaces import load_model
+from tactrec.surfaces.mesh_table import sample_vertices, vertex_curvatures
 from tactrec.surfaces.mesh import MeshModel
 from tactrec.surfaces.mesh_cleanup import clean_mesh
 
@@ -61,8 +62,8 @@ def test_table_curvatures_within_5_percent_on_a_torus():
 
 def test_vertex_sampling_follows_the_paper_and_is_seeded():
     m = _model(trimesh.creation.icosphere(subdivisions=4, radius=20.0))
-    a, b = m.sample_vertices(rng=1), m.sample_vertices(rng=1)
-    assert np.array_equal(a, b) and not np.array_equal(a, m.sample_vertices(rng=2))
+    a, b = sample_vertices(m, rng=1), sample_vertices(m, rng=1)
+    assert np.array_equal(a, b) and not np.array_equal(a, sample_vertices(m, rng=2))
     # the marked neighbourhoods of different samples do not overlap: samples are > 2 rings apart
     for v in a[:20]:
         assert not set(m.ring(int(v), 2)) & (set(a.tolist()) - {int(v)})
@@ -81,7 +82,7 @@ def test_messy_scan_is_cleaned_and_reported(tmp_path):
     assert rep["degenerate_faces_dropped"] >= 1
     assert len(m.vertices) == len(sphere.vertices) and len(m.faces) == len(sphere.faces)
     assert m.units == "mm" and np.isclose(np.linalg.norm(m.vertices, axis=1).max(), 30.0, rtol=1e-6)
-    k1, k2 = m.vertex_curvatures([0, 100])
+    k1, k2 = vertex_curvatures(m, [0, 100])
     assert np.allclose([k1, k2], -1 / 30.0, rtol=0.05)                  # per millimetre
 
 

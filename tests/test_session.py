@@ -14,7 +14,7 @@ from tactrec.errors import InputError
 from tactrec.io.session import SessionTouch, load_session, save_session
 from tactrec.recognition import Recognizer
 from tactrec.session import STAGES
-from tactrec.simulation import random_rigid_motion, sensor_to_world, simulate_random_touch, simulate_world_touch
+from tactrec.simulation import random_rigid_motion, sensor_to_world, simulate_random_touch
 
 NOISY = dict(points=41, spacing=0.3, angle=60.0, noise=0.03, noise_kind="gaussian", outward=False)
 #: the hard touches of ``bench multi-touch``: 12 mm curves 30 degrees apart, noise 0.05 mm, no outward side

@@ -32,7 +32,7 @@ from .surfaces import KINDS, load_model, resolve_models
 from .tables import CurvatureTable
 
 __all__ = ["Database", "BuildReport", "build_database", "load_database", "build_entries", "file_sha256",
-           "open_models", "cache_folder", "cached_database"]
+           "open_models", "cache_folder", "cached_database", "model_entry"]
 
 FORMAT = "tactrec-db"
 VERSION = 3            # 2: meshes store their fitted normals; 3: and their distance fields (the engine's screen)
@@ -87,7 +87,8 @@ def _progress(iterable, *, total: int, desc: str, quiet: bool):
                 disable=quiet or not sys.stderr.isatty(), leave=False)
 
 
-def _entry(model) -> ModelEntry:
+def model_entry(model) -> ModelEntry:
+    """A model and its lookup table (the paper's, Section 3.2.1 or 5.2), built now."""
     return ModelEntry(model, CurvatureTable(model.table_samples()))
 
 
@@ -98,7 +99,7 @@ def build_entries(models: Iterable, *, quiet: bool = True, units: str | None = N
     ``units`` and ``scale`` apply to mesh files (see :func:`tactrec.surfaces.load_model`).
     """
     sources = resolve_models(models)
-    entries = [_entry(load_model(src, units=units, scale=scale))
+    entries = [model_entry(load_model(src, units=units, scale=scale))
                for src in _progress(sources, total=len(sources), desc="models", quiet=quiet)]
     _check_unique([e.name for e in entries], [src.path for src in sources])
     return Database(entries)
@@ -186,7 +187,7 @@ def load_database(path: str | os.PathLike, *, warn=None) -> Database:
 
 def _stored_blob(model) -> tuple[bytes, int]:
     """A model's database file (its arrays and its table, compressed) and its table's rows."""
-    entry = _entry(model)
+    entry = model_entry(model)
     arrays = dict(model.to_store(), **entry.table.to_arrays())
     buffer = io.BytesIO()
     np.savez_compressed(buffer, **arrays)

@@ -9,10 +9,11 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["plot_registration", "plot_uv_locations", "save_figure"]
+__all__ = ["plot_registration", "plot_uv_locations", "save_figure", "pyplot"]
 
 
-def _plt():
+def pyplot():
+    """matplotlib's pyplot on the Agg backend (no display), imported when a figure is first drawn."""
     import matplotlib
 
     matplotlib.use("Agg", force=False)
@@ -31,7 +32,7 @@ def plot_registration(model, curves_model_frame, *, location=None, ax=None, titl
     location : (3,) array, optional
         The registered contact point.
     """
-    plt = _plt()
+    plt = pyplot()
     if ax is None:
         fig = plt.figure(figsize=(6, 5))
         ax = fig.add_subplot(projection="3d")
@@ -65,7 +66,7 @@ def plot_registration(model, curves_model_frame, *, location=None, ax=None, titl
 
 def plot_uv_locations(model, true_uv, estimated_uv, *, ax=None, title=None):
     """Fig. 8: true contact locations (dots) and estimates (crosses) in the (u, v) domain."""
-    plt = _plt()
+    plt = pyplot()
     if ax is None:
         _, ax = plt.subplots(figsize=(4, 4))
     true_uv = np.asarray(true_uv, dtype=float).reshape(-1, 2)
@@ -86,7 +87,7 @@ def save_figure(ax_or_fig, path) -> None:
 
     from .io.atomic import write_bytes_atomic
 
-    plt = _plt()
+    plt = pyplot()
     fig = getattr(ax_or_fig, "figure", ax_or_fig)
     fig.tight_layout()
     buf = io.BytesIO()

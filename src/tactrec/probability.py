@@ -73,31 +73,12 @@ def fit_standard_error(fit: float, points: int) -> float:
     return float(fit) * np.sqrt(np.pi / 2.0 - 1.0) / np.sqrt(points)
 
 
-def planes(model, moved: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Signed distances ``(m,)`` of ``moved (m, 3)`` (model units) to ``model`` and the unit normals
-    ``(m, 3)`` of the planes they are measured against (positive outside): a mesh's closest-point
-    planes (:func:`tactrec.registration.mesh_fast.signed_distances`), a closed-form surface's
-    first-order distance ``f / |grad f|``."""
-    moved = np.asarray(moved, dtype=np.float64)
-    if model.kind == "mesh":
-        from .registration.mesh_fast import _planes
-
-        return _planes(model, moved)
-    fg = model.implicit(moved, order=1)
-    g = fg[..., 1:]
-    norm = np.linalg.norm(g, axis=-1)
-    with np.errstate(all="ignore"):
-        d = fg[..., 0] / norm
-    d = np.where(np.isfinite(d), d, model.distance(moved))
-    return d, g / np.maximum(norm, 1e-300)[..., None]
-
-
 def residuals(model, rotation: np.ndarray, translation: np.ndarray, points: np.ndarray,
               scale: float = 1.0) -> np.ndarray:
     """Signed distances ``(m,)`` of data ``points (m, 3)`` (data units) to ``model`` under the pose
     ``model = scale * rotation @ data + translation``, in data units (positive outside)."""
     moved = scale * (np.asarray(points, dtype=np.float64) @ np.asarray(rotation).T) + np.asarray(translation)
-    return np.asarray(planes(model, moved)[0], dtype=np.float64) / scale
+    return np.asarray(model.planes(moved)[0], dtype=np.float64) / scale
 
 
 @dataclasses.dataclass(frozen=True)

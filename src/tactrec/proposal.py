@@ -55,7 +55,7 @@ import dataclasses
 import numpy as np
 from scipy.special import erf
 
-from .probability import planes
+from .registration.solver import jacobian
 from .session_result import LEADING, MASS
 from .simulation import simulate_world_touch
 
@@ -153,8 +153,10 @@ def _jacobian(model, moved: np.ndarray):
     """Signed distances ``(m,)`` of model-frame points ``moved (m, 3)`` and their pose Jacobian
     ``(m, 6)``: the change of each distance under a small turn ``w`` (per model size) and shift
     ``u`` of the model frame, ``(m x n) . w + n . u``."""
-    d, n = planes(model, moved)
-    return d, np.concatenate([np.cross(moved, n) / model.size, n], axis=1)
+    d, n = model.planes(moved)
+    J = jacobian(moved, n)
+    J[:, :3] /= model.size
+    return d, J
 
 
 def _information(model, pose: np.ndarray, scale: float, x_world: np.ndarray) -> np.ndarray:

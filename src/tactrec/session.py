@@ -286,7 +286,7 @@ class Session:
         for r in self.solo[-1].ranking:
             h = self.result.hypothesis(r.model)
             fits_all = h is not None and all(c for i, c in enumerate(h.consistent) if i not in slipped)
-            own = r.error / r.scale if r.ok else (np.inf if str(r.rejected).startswith("deferred") else None)
+            own = r.error / r.scale if r.ok else (np.inf if r.deferred else None)
             if own is not None and own <= limit and not fits_all:
                 out.append(r.model)
         return out

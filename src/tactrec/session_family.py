@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .probability import planes
+from .linalg import gram
+from .registration.solver import jacobian
 from .session_fit import per_touch, refine
 
 __all__ = ["free_poses", "distinct", "FAMILY", "APART", "FREE", "FAMILY_ITERATIONS"]
@@ -31,9 +32,8 @@ def free_poses(session, model, best, use: np.ndarray, x: np.ndarray) -> np.ndarr
     from .registration.result import rotations_from_vectors
 
     moved = x @ best.rotation.T + best.translation
-    n = planes(model, moved)[1]
-    J = np.concatenate([np.cross(moved, n), n], axis=1)                             # (m, 6)
-    values, vectors = np.linalg.eigh(J.T @ J)
+    n = model.planes(moved)[1]
+    values, vectors = np.linalg.eigh(gram(jacobian(moved, n)[None])[0])              # J^T J (6, 6)
     centre = moved.mean(axis=0)
     R, t = [], []
     for k in np.nonzero(values < FREE * values[-1])[0]:

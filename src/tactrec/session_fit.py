@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from .linalg import transform
+from .registration.solver import Criteria, solve
 
 __all__ = ["refine", "per_touch", "fit_stage", "JOINT_ITERATIONS", "REFINED"]
 
@@ -16,15 +17,10 @@ JOINT_ITERATIONS, REFINED = 15, 2
 
 
 def refine(model, R: np.ndarray, t: np.ndarray, x: np.ndarray, iterations: int):
-    """Poses ``R (h, 3, 3), t (h, 3)`` refined on points ``x (m, 3)`` (model units): ``R, t, error (h,)``."""
-    if model.kind == "mesh":
-        from .registration import mesh_fast
-
-        R, t, error, _ = mesh_fast.refine(model, R, t, x, iterations=iterations)
-        return R, t, error
-    from .registration import closedform_fast
-
-    return closedform_fast.refine(model, R, t, x, iterations=iterations)
+    """Poses ``R (h, 3, 3), t (h, 3)`` refined on points ``x (m, 3)`` (model units) by the one
+    point-to-plane solver (:func:`tactrec.registration.solver.solve`): ``R, t, error (h,)``."""
+    fit = solve(model, R, t, x, Criteria(iterations))
+    return fit.R, fit.t, fit.error
 
 
 def per_touch(model, R: np.ndarray, t: np.ndarray, points: list, scale: float) -> np.ndarray:

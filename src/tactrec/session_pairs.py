@@ -6,9 +6,10 @@ true place can rank in the thousands, beyond any budget.  Two touches of one
 still object in one frame need no curvature: their contacts ``c_i, c_j`` and
 normals ``n_i, n_j`` fix the pose.
 
-The model is sampled evenly over its surface (a mesh: as many samples as it
-has vertices, with the vertex normals interpolated; a closed-form surface:
-:data:`SAMPLES` seeded sites).  Each sample's *turn* is the largest angle
+The model is sampled evenly over its surface (its
+:meth:`~tactrec.surfaces.base.SurfaceModel.oriented_samples`: a mesh, as many
+samples as it has vertices, with the vertex normals interpolated; a
+closed-form surface, 6000 seeded sites).  Each sample's *turn* is the largest angle
 between its normal and its neighbours' (either sign: a thin wall's two sides
 are not neighbours): it bounds how far the normal of a point between samples
 is from theirs.  Put touch ``i``'s contact on a place ``a`` (one sample per
@@ -51,13 +52,12 @@ import numpy as np
 from .features import subset
 from .linalg import compose, rotate, stable_order, transform
 from .registration.result import Registration
+from .registration.solver import Criteria, solve
 from .session_fit import refine
 from .surfaces.mesh_curvature import tangents
 
-__all__ = ["PairSearch", "pair_stage", "search", "turns", "SAMPLES", "CHUNK", "BATCH", "PLACE_CELL", "NORMAL_ERROR"]
+__all__ = ["PairSearch", "pair_stage", "search", "turns", "CHUNK", "BATCH", "PLACE_CELL", "NORMAL_ERROR"]
 
-#: oriented points sampled on a closed-form surface (a mesh: as many as its vertices, evenly over its surface)
-SAMPLES = 6000
 #: (place, turn) pairs handled at once
 CHUNK = 200_000
 #: models a pair search poses at once (a constant, so which models it searches is the same on any
@@ -105,22 +105,7 @@ def _oriented_points(model) -> _Samples:
     """A model's oriented samples (module text)."""
     from scipy.spatial import cKDTree
 
-    if model.kind == "mesh":
-        import trimesh
-
-        # trimesh's sample_surface_even, less its warning when fewer than asked survive: three
-        # times as many uniform samples, those closer than the spacing they would have removed
-        mesh, count = model._trimesh, len(model.vertices)
-        points, face = trimesh.sample.sample_surface(mesh, 3 * count, seed=0)
-        points, kept = trimesh.points.remove_close(points, float(np.sqrt(mesh.area / (3 * count))))
-        points, face = points[:count], face[kept][:count]
-        corners = model.vertices[model.faces[face]]
-        weights = trimesh.triangles.points_to_barycentric(corners, points)
-        normals = np.einsum("nk,nkj->nj", weights, model.vertex_normals[model.faces[face]])
-        normals /= np.linalg.norm(normals, axis=1, keepdims=True)
-    else:
-        frames = [model.site_frame(s) for s in model.random_sites(SAMPLES, rng=np.random.default_rng(0))]
-        points, normals = np.array([f.point for f in frames]), np.array([f.normal for f in frames])
+    points, normals = model.oriented_samples(rng=0)
     tree = cKDTree(points)
     spacing = 1.5 * float(np.median(tree.query(points, k=2)[0][:, 1]))
     cell = np.floor((points - points.min(axis=0)) / (PLACE_CELL * spacing)).astype(np.int64)
@@ -223,14 +208,8 @@ def _scored(model, samples: _Samples, R, t, curves, options, scale):
     keep = stable_order(screen)[:max(options["screen"], len(R) // 8)]
     queries = len(R) * len(ends)
     coarse = subset(curves, options["coarse_points"])
-    if model.kind == "mesh":
-        from .registration import mesh_fast
-
-        R, t, score, q = mesh_fast.refine(model, R[keep], t[keep], coarse, iterations=2, predict=True)
-        queries += q
-    else:
-        R, t, score = refine(model, R[keep], t[keep], coarse, 2)
-        queries += 3 * len(keep) * len(coarse)
+    R, t, score, q = solve(model, R[keep], t[keep], coarse, Criteria(2, predict=True))
+    queries += q
     keep = stable_order(score)[:options["refine"]]
     fine = subset(curves, 3 * options["coarse_points"])
     R, t, error = refine(model, R[keep], t[keep], fine, options["iterations"])

@@ -36,7 +36,7 @@ import numpy as np
 
 from ..io.atomic import write_text_atomic
 from ..probability import Evidence, residuals
-from ..registration import mesh_fast
+from ..registration.solver import Criteria, solve
 from ..surfaces import BUILTIN_SETS
 from ..units import conversion
 from .common import CORE_SOURCES, recognizer, run_parallel, saved_record, sources_hash, write_json
@@ -79,7 +79,7 @@ def _truth_fit(entry, touch) -> dict:
     truth = touch.meta["truth"]
     R = np.asarray(truth["rotation"], dtype=np.float64)[None]
     t = np.asarray(truth["translation"], dtype=np.float64)[None] * scale
-    R, t, _, _ = mesh_fast.refine(entry.model, R, t, touch.points * scale, iterations=30)
+    R, t, _, _ = solve(entry.model, R, t, touch.points * scale, Criteria(30))
     r = residuals(entry.model, R[0], t[0], touch.points, scale)
     return {"squares": float(np.sum(r * r))}
 
@@ -155,9 +155,9 @@ def summary(rows: list[dict]) -> dict:
 
 
 def _plot(table: dict, path: Path) -> None:
-    from ..plots import _plt, save_figure
+    from ..plots import pyplot, save_figure
 
-    plt = _plt()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(5, 5))
     ax.plot([0, 1], [0, 1], color="grey", lw=0.8, ls="--", label="calibrated")
     for name, s in table["summary"].items():

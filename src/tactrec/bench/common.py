@@ -43,7 +43,7 @@ SCANS = ("shipped", "paper-like")
 def scan_database(models: tuple[str, ...], scans: str = "shipped"):
     """The built-in ``models`` with their tables, as shipped or (meshes) made like the paper's
     (``scans``, one of :data:`SCANS`), kept for the rest of this process."""
-    from ..database import Database, _entry, build_entries
+    from ..database import Database, model_entry, build_entries
     from ..errors import InputError
     from ..surfaces import load_model
 
@@ -52,7 +52,7 @@ def scan_database(models: tuple[str, ...], scans: str = "shipped"):
     if scans == "paper-like":
         from ..surfaces.paper_like import paper_like
 
-        return Database([_entry(paper_like(load_model(m))) for m in models])
+        return Database([model_entry(paper_like(load_model(m))) for m in models])
     raise InputError(f"unknown scans {scans!r}; choose from {', '.join(SCANS)}")
 
 

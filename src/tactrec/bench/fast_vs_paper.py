@@ -203,9 +203,9 @@ def _markdown(table: dict) -> str:
 
 
 def _plot(table, out: Path, name: str = "fast-vs-paper") -> Path:
-    from ..plots import _plt, save_figure
+    from ..plots import pyplot, save_figure
 
-    plt = _plt()
+    plt = pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(11, 3.8))
     protocols = list(table["summary"])
     methods = [m for m in METHODS if any(table["summary"][p].get(m) for p in protocols)]

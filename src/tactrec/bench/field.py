@@ -44,7 +44,6 @@ def _stats(error: np.ndarray, spacing: float) -> dict:
 
 
 def _model(model, seed: int, index: int, count: int) -> dict:
-    from ..registration.mesh_fast import signed_distances
     from ..surfaces.mesh_field import build_field
 
     start = time.perf_counter()
@@ -53,7 +52,7 @@ def _model(model, seed: int, index: int, count: int) -> dict:
     rng = instance_rng(seed, index)
     on = _points(model, rng, count, 0.0)
     band = _points(model, rng, count, field.truncation - 2 * field.spacing)
-    exact = signed_distances(model, band)
+    exact = model.planes(band)[0]
     keep = np.abs(exact) < field.truncation - 2 * field.spacing
     return {"model": model.name, "vertices": len(model.vertices), "mean_edge": model.mean_edge,
             "spacing": field.spacing, "truncation": field.truncation, "bricks": len(field.bricks),

@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from ..io.atomic import write_text_atomic
-from ..registration import mesh_fast
+from ..registration.solver import Criteria, solve
 from ..registration.result import apply_poses
 from ..units import conversion
 from .common import CORE_SOURCES, recognizer, run_parallel, saved_record, sources_hash, write_json
@@ -77,7 +77,7 @@ def _touch(task) -> dict:
     scale = conversion(touch.units, getattr(entry.model, "units", None))
     R = np.asarray(truth["rotation"], dtype=np.float64)[None]
     t = np.asarray(truth["translation"], dtype=np.float64)[None] * scale
-    R, t, refined, _ = mesh_fast.refine(entry.model, R, t, touch.points * scale, iterations=30)
+    R, t, refined, _ = solve(entry.model, R, t, touch.points * scale, Criteria(30))
     truth_error = float(refined[0]) / scale
     own = min(truth_error, errors.get(entry.name, np.inf))
     others = min((e for name, e in errors.items() if name != entry.name), default=np.inf)

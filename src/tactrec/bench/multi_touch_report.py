@@ -102,9 +102,9 @@ def summary(rows: list[dict], strategies, touches: int) -> dict:
 
 
 def plot(table: dict, out: Path) -> None:
-    from ..plots import _plt, save_figure
+    from ..plots import pyplot, save_figure
 
-    plt = _plt()
+    plt = pyplot()
     touches = table["touches"]
     fig, ax = plt.subplots(figsize=(6, 4))
     for name, s in table["summary"].items():

@@ -95,7 +95,7 @@ def other_database(names: tuple[str, ...] = OTHER):
     tables, kept for the rest of this process."""
     import trimesh
 
-    from ..database import Database, _entry
+    from ..database import Database, model_entry
     from ..surfaces.mesh import MeshModel
 
     files = fetch()
@@ -110,5 +110,5 @@ def other_database(names: tuple[str, ...] = OTHER):
         model = MeshModel(model.vertices * (sizes[name] / diagonal), model.faces, name=name, units="mm",
                           source=model.source, source_hash=model.source_hash, scale=sizes[name] / diagonal,
                           cleanup=model.cleanup)
-        entries.append(_entry(model))
+        entries.append(model_entry(model))
     return Database(entries)

@@ -87,9 +87,9 @@ def _run(*, instances: int, seed: int, jobs: int | None, quiet: bool, method: st
 
 
 def _fig8(records, out: Path, name: str) -> Path:
-    from ..plots import _plt, plot_uv_locations, save_figure
+    from ..plots import pyplot, plot_uv_locations, save_figure
 
-    plt = _plt()
+    plt = pyplot()
     db = _database()
     fig, axes = plt.subplots(1, len(SURFACES), figsize=(4 * len(SURFACES), 4))
     for ax, entry in zip(axes, db.entries):

@@ -219,9 +219,9 @@ def run_fig11(*, out, instances: int = 10, seed: int = 0, jobs: int | None = Non
 
 
 def _plot(table, out: Path, name: str) -> Path:
-    from ..plots import _plt, save_figure
+    from ..plots import pyplot, save_figure
 
-    plt = _plt()
+    plt = pyplot()
     fig, axes = plt.subplots(1, 3, figsize=(13, 3.8))
     for ax, (key, label) in zip(axes, (("delta", "delta (1/mm)"), ("length", "l (mm)"), ("angle", "phi (deg)"))):
         xs = [float(k) for k in table[key]]

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from ..surfaces import BUILTIN_SETS, load_model
+from ..surfaces.mesh_table import sample_vertices, vertex_curvatures
 from .common import paper_values, write_json
 
 __all__ = ["run_table4"]
@@ -31,10 +32,10 @@ def run_table4(*, out, instances: int = 1, seed: int = 0, jobs=None, quiet: bool
         samples, t_sample, t_table = [], [], []
         for i in range(instances):
             start = time.perf_counter()
-            chosen = model.sample_vertices(rng=np.random.SeedSequence([seed, i]).generate_state(1)[0])
+            chosen = sample_vertices(model, rng=np.random.SeedSequence([seed, i]).generate_state(1)[0])
             t_sample.append(time.perf_counter() - start)
             start = time.perf_counter()
-            model.vertex_curvatures(chosen)
+            vertex_curvatures(model, chosen)
             t_table.append(time.perf_counter() - start)
             samples.append(len(chosen))
         tm = model._trimesh

@@ -39,6 +39,7 @@ from ..estimation import estimate
 from ..io.atomic import write_text_atomic
 from ..registration import mesh_paper
 from ..surfaces import BUILTIN_SETS
+from ..surfaces.mesh_table import vertex_curvatures
 from .common import SCANS, run_parallel, scan_database, write_json
 from .paper_fig11 import DEFAULTS, p3_touch
 
@@ -68,7 +69,7 @@ def _touch(task) -> dict:
     vertex, data = p3_touch(model, m_index, instance, seed=seed, length=DEFAULTS["length"],
                             angle=DEFAULTS["angle"])
     rotation = np.asarray(data.meta["truth"]["rotation"])          # data -> model
-    k1_true, k2_true = (float(k[0]) for k in model.vertex_curvatures([vertex]))
+    k1_true, k2_true = (float(k[0]) for k in vertex_curvatures(model, [vertex]))
     here = model.vertices[vertex]
     record = {"model": entry.name, "instance": instance, "vertex": vertex, "table_at_touch": [k1_true, k2_true],
               "readings": {}}

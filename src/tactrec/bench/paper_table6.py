@@ -38,7 +38,8 @@ from ..errors import InputError
 from ..estimation import estimate
 from ..io.atomic import write_text_atomic
 from ..methods.paper import PaperConfig
-from ..registration import mesh_fast, mesh_paper
+from ..registration import mesh_paper
+from ..registration.solver import Criteria, solve
 from ..simulation import simulate_touch, spread_vertices
 from ..surfaces import BUILTIN_SETS
 from .common import (SCANS, error_cell, errors_on_every_model, instance_rng, paper_options, run_parallel,
@@ -71,8 +72,8 @@ def _touch(task) -> dict:
     truth = data.meta["truth"]
     # the truth's own fit, each method's way: eq. 15 at the touched vertex (best 10-degree rotation),
     # and the true pose refined on exact distances
-    _, _, refined, _ = mesh_fast.refine(entry.model, np.asarray(truth["rotation"])[None],
-                                        np.asarray(truth["translation"])[None], data.points, iterations=20)
+    _, _, refined, _ = solve(entry.model, np.asarray(truth["rotation"])[None],
+                             np.asarray(truth["translation"])[None], data.points, Criteria(20))
     try:
         geometry = PaperConfig.from_options("paper", dict(readings)).geometry(data) or estimate(data)
     except InputError as exc:                    # counted as a miss of both methods, not the end of the run

@@ -34,9 +34,10 @@ from scipy.spatial.transform import Rotation
 from ..features import Touch
 from ..io.atomic import write_text_atomic
 from ..methods import get_method
-from ..methods.fast import TIERS, _tier_cost, fit_limit
-from ..methods.fast_stages import _span
+from ..methods.fast import TIERS, tier_cost, fit_limit
+from ..methods.fast_stages import tier_span
 from ..registration import mesh_fast
+from ..registration.solver import Criteria, solve
 from ..surfaces import BUILTIN_SETS
 from .common import instance_rng, run_parallel, write_json
 from .fast_vs_paper import PROTOCOLS, _database, _simulate
@@ -50,7 +51,7 @@ ANGLES = (0.0, 2.0, 8.0, 15.0)
 def _tier_of(rank: int) -> str:
     """The first default tier whose places include ``rank`` (0-based)."""
     for k, tier in enumerate(TIERS):
-        start, stop = _span(TIERS, k)
+        start, stop = tier_span(TIERS, k)
         if stop is None or rank < stop:
             return f"tier {k + 1}"
     return "beyond"
@@ -80,9 +81,9 @@ def _touch(task) -> dict:
     for angle in ANGLES:
         R = np.einsum("hij,jk->hik", Rotation.from_rotvec(np.deg2rad(angle) * axis).as_matrix(), R0)
         t = (R0 @ contact + t0) - np.einsum("hij,j->hi", R, contact)
-        R, t, _, _ = mesh_fast.refine(model, R, t, touch.subset(3 * config.coarse_points),
-                                      iterations=config.iterations, tolerance=config.tolerance)
-        R, t, error, _ = mesh_fast.refine(model, R, t, touch.points, iterations=2, tolerance=config.tolerance)
+        R, t, _, _ = solve(model, R, t, touch.subset(3 * config.coarse_points),
+                           Criteria(config.iterations, tolerance=config.tolerance))
+        R, t, error, _ = solve(model, R, t, touch.points, Criteria(2, tolerance=config.tolerance))
         basin[f"{angle:g}"] = float(np.mean(error <= limit))
     return {"model": entry.name, "protocol": protocol, "instance": instance, "rank": min(ranks),
             "tier": _tier_of(min(ranks)), "basin": basin, "mean_edge": model.mean_edge, "radius": touch.radius}
@@ -99,7 +100,7 @@ def run(*, out, instances: int = 10, seed: int = 0, jobs: int | None = None, qui
     records = run_parallel(_touch, tasks, jobs=jobs or 1, quiet=quiet, desc="search-limits")
     config = get_method("fast").configure()
     db = _database(models)
-    cost = {e.name: [_tier_cost(config, k, 1, len(e.model.vertices)) for k in range(len(TIERS))] for e in db.entries}
+    cost = {e.name: [tier_cost(config, k, 1, len(e.model.vertices)) for k in range(len(TIERS))] for e in db.entries}
     summary = {}
     for protocol in protocols:
         rows = [r for r in records if r["protocol"] == protocol]

@@ -74,9 +74,9 @@ from ..probability import fit_limit, fit_standard_error
 from ..registration import closedform_fast, mesh_fast
 from ..registration.result import Registration
 from .base import NOT_SEARCHED, Config, SearchOutcome
-from .fast_stages import _cheap, _closed_form, _polished, _refined, _span
+from .fast_stages import _cheap, _closed_form, _polished, _refined, tier_span
 
-__all__ = ["FastMethod", "FastConfig", "Tier", "TIERS"]
+__all__ = ["FastMethod", "FastConfig", "Tier", "TIERS", "tier_cost"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -158,13 +158,13 @@ def _error(r: Registration | None) -> float:
     return r.error / r.scale if r is not None and r.ok else np.inf
 
 
-def _tier_cost(config: FastConfig, k: int, signs: int, places: int, curves: int = 3, context: int = 0) -> int:
+def tier_cost(config: FastConfig, k: int, signs: int, places: int, curves: int = 3, context: int = 0) -> int:
     """About how many closest-point queries tier ``k`` costs on one model with ``places`` places, a
     pose scored on ``curves`` curves of the touch (the field's screen also on one point of each of
     ``context`` curves of other touches)."""
     tier = config.tiers[k]
     if tier.rotations == "field":
-        start, stop = _span(config.tiers, k)
+        start, stop = tier_span(config.tiers, k)
         lookups, alive = 0, max(0, min(places, stop if stop is not None else places) - start)
         for rotations, per_curve, share in config.screen_stages:
             lookups += alive * rotations * (per_curve * curves + context)
@@ -174,7 +174,7 @@ def _tier_cost(config: FastConfig, k: int, signs: int, places: int, curves: int 
         refine = config.refine * config.iterations * curves * 3 * config.coarse_points
         # twice: a contact on a feature is screened with two data normals (engine.screen.data_normals)
         return int(2 * signs * (lookups * LOOKUP_COST + exact) + refine)
-    start, stop = _span(config.tiers, k)
+    start, stop = tier_span(config.tiers, k)
     count = max(0, min(places, stop if stop is not None else places) - start)
     poses = count * signs * (2 if tier.rotations == "frames" else 12) * (5 if tier.tilt > 0 else 1)
     screened = min(poses, max(config.screen, poses // 8)) if tier.places is not None else poses
@@ -290,7 +290,7 @@ class FastMethod:
                 break
             k = state.next[group[0]]
             group = [i for i in group if state.next[i] == k]
-            cost = sum(_tier_cost(config, k, signs, state.sizes[i], len(touch.curves), len(touch.context))
+            cost = sum(tier_cost(config, k, signs, state.sizes[i], len(touch.curves), len(touch.context))
                        for i in group)
             # the budget bounds the poses tried: work on other touches' points (a context) counts as
             # the touch's own share of the points scored, as a round's cost is counted
@@ -347,5 +347,5 @@ class FastMethod:
             else:
                 ranking.append(Registration.rejection(
                     entry.name, f"deferred: its best cheap score {state.cheapest[i]:.3g} stayed beyond "
-                    f"{state.config.ratio:g} x the best error", cheap=state.cheapest[i]))
+                    f"{state.config.ratio:g} x the best error", cheap=state.cheapest[i], deferred=True))
         return ranking

@@ -15,12 +15,13 @@ from ..engine import LOOKUP_COST
 from ..linalg import stable_order
 from ..registration import closedform_fast, mesh_fast
 from ..registration.result import Registration
+from ..registration.solver import Criteria, solve
 from .common import best_of_orientations, in_model_units
 
 if TYPE_CHECKING:
     from .fast import FastConfig
 
-__all__: list = []
+__all__ = ["tier_span"]
 
 def _places(held, index: int, touch, sign: int, config: FastConfig, every: bool):
     """The model's places in order for this touch and normal, computed once per touch."""
@@ -50,7 +51,7 @@ def _screen_places(held, index: int, touch, sign: int, config: FastConfig) -> np
     return held.cache[key]
 
 
-def _span(tiers, k: int) -> tuple[int, int | None]:
+def tier_span(tiers, k: int) -> tuple[int, int | None]:
     """Which of the ranked places tier ``k`` adds: those past the deepest earlier tier of the same kind."""
     tier = tiers[k]
     start = max((t.places or 0 for t in tiers[:k] if (t.rotations, t.tilt) == (tier.rotations, tier.tilt)),
@@ -77,7 +78,7 @@ def _cheap(held, indices, touch, config: FastConfig, k: int) -> list[dict]:
                 from ..engine.kernels import field_refine            # numba: only once a search needs it
                 from ..engine.screen import DISTINCT, data_normals, screen
 
-                start, stop = _span(config.tiers, k)
+                start, stop = tier_span(config.tiers, k)
                 spots = _screen_places(held, index, t, sign, config)[start:stop]
                 if len(spots) == 0:
                     continue
@@ -90,12 +91,12 @@ def _cheap(held, indices, touch, config: FastConfig, k: int) -> list[dict]:
                                                config.field_steps)
                     queries += (found.lookups + len(R) * len(x3) * (config.field_steps + 1)) * LOOKUP_COST
                     best = stable_order(grid)[:2 * config.refine]
-                    R, tr, score, q = mesh_fast.refine(model, R[best], tr[best], x, iterations=1, predict=True,
-                                                       tolerance=config.tolerance)
+                    R, tr, score, q = solve(model, R[best], tr[best], x,
+                                            Criteria(1, tolerance=config.tolerance, predict=True))
                     queries += q
                     poses.append((R, tr, score, np.full(len(R), sign)))
                 continue
-            start, stop = _span(config.tiers, k)
+            start, stop = tier_span(config.tiers, k)
             for lo in range(start, len(chosen) if stop is None else min(stop, len(chosen)), 1000):
                 part = chosen[lo:min(lo + 1000, len(chosen) if stop is None else stop)]
                 tried += len(part)
@@ -104,11 +105,10 @@ def _cheap(held, indices, touch, config: FastConfig, k: int) -> list[dict]:
                 steps = config.cheap_steps
                 kept = max(config.screen, len(R) // 8)
                 if tier.places is not None and len(R) > kept and steps > 1:
-                    R, tr, first, q = mesh_fast.refine(model, R, tr, screened, iterations=1, predict=True)
+                    R, tr, first, q = solve(model, R, tr, screened, Criteria(1, predict=True))
                     keep = stable_order(first)[:kept]
                     R, tr, owner, steps, queries = R[keep], tr[keep], owner[keep], steps - 1, queries + q
-                R, tr, score, q = mesh_fast.refine(model, R, tr, x, iterations=steps, predict=True,
-                                                   tolerance=config.tolerance)
+                R, tr, score, q = solve(model, R, tr, x, Criteria(steps, tolerance=config.tolerance, predict=True))
                 queries += q
                 order = np.lexsort((stable_order(score).argsort(), owner))          # each place's best rotation
                 best = order[np.r_[True, owner[order][1:] != owner[order][:-1]]]
@@ -138,13 +138,13 @@ def _refined(held, indices, touch, config: FastConfig, chosen: list[dict]) -> li
     for index, poses in zip(indices, chosen):
         model = held.entries[index].model
         t = in_model_units(touch, model)
-        R, tr, error, q1 = mesh_fast.refine(model, poses["R"], poses["t"], t.joint_subset(3 * config.coarse_points),
-                                           iterations=config.iterations, tolerance=config.tolerance)
+        R, tr, error, q1 = solve(model, poses["R"], poses["t"], t.joint_subset(3 * config.coarse_points),
+                                 Criteria(config.iterations, tolerance=config.tolerance))
         order = stable_order(error)
         b = order[0]
         others = np.concatenate([R[order], tr[order][:, :, None]], axis=2)                 # (k, 3, 4), best first
-        R, tr, error, q2 = mesh_fast.refine(model, R[b:b + 1], tr[b:b + 1], t.joint_points, iterations=2,
-                                           tolerance=config.tolerance)
+        R, tr, error, q2 = solve(model, R[b:b + 1], tr[b:b + 1], t.joint_points,
+                                 Criteria(2, tolerance=config.tolerance))
         found = _registration(model, t, R[0], tr[0], error[0], int(poses["sign"][b]))
         out.append({"registration": dataclasses.replace(found, alternatives=others), "queries": q1 + q2})
     return out
@@ -157,8 +157,8 @@ def _polished(held, indices, touch, config: FastConfig, registrations: list[Regi
         model = held.entries[index].model
         t = in_model_units(touch, model)
         if model.kind == "mesh":
-            R, tr, error, q = mesh_fast.refine(model, r.rotation[None], r.translation[None], t.joint_points,
-                                               iterations=config.polish_iterations, tolerance=config.tolerance)
+            R, tr, error, q = solve(model, r.rotation[None], r.translation[None], t.joint_points,
+                                    Criteria(config.polish_iterations, tolerance=config.tolerance))
             better = dataclasses.replace(_registration(model, t, R[0], tr[0], error[0], r.normal_sign),
                                          alternatives=r.alternatives) if error[0] < r.error else r
         else:

@@ -9,7 +9,7 @@ Differences from the paper's Section 4.2 (:mod:`.closedform_paper`):
    on eq. 11), but then, instead of steepest descent on ``(u, v, phi)``, the
    pose is refined in all six degrees of freedom by damped Gauss-Newton on
    the first-order distances ``f / |grad f|`` of eq. 11 (point-to-plane
-   against the implicit surface), all candidates at once; the contact point
+   against the implicit surface: :mod:`.solver`), all candidates at once; the contact point
    is then the surface point nearest to the moved contact.
 
 The error is eq. 12's mean first-order distance, as in the paper.
@@ -23,7 +23,8 @@ from ..estimation import LocalGeometry
 from ..surfaces.closedform import ClosedFormSurface
 from ..tables import CurvatureTable
 from .closedform_paper import Superposition
-from .result import Registration, apply_poses, local_frame, point_to_plane_step, rotations_z
+from .result import Registration, local_frame, rotations_z
+from .solver import Criteria, solve
 
 __all__ = ["register", "polish", "refine", "DEFAULTS"]
 
@@ -37,33 +38,11 @@ DEFAULTS = {
 
 def refine(model: ClosedFormSurface, R: np.ndarray, t: np.ndarray, x: np.ndarray, *, iterations: int
            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Damped Gauss-Newton on poses ``R (h, 3, 3), t (h, 3)`` of data ``x (m, 3)``.
-
-    Residuals ``r_i = f(y_i) / |grad f(y_i)|`` at ``y_i = R x_i + t``, with
-    the normal ``grad f / |grad f|`` held fixed within a step.  Returns the
-    poses and their errors (eq. 11, ``inf`` where ``f`` is singular).
-    """
-    R, t = R.copy(), t.copy()
-    active = np.ones(len(R), dtype=bool)
-    for _ in range(iterations):
-        a = np.nonzero(active)[0]
-        if len(a) == 0:
-            break
-        y = apply_poses(R[a], t[a], x)
-        fg = model.implicit(y, order=1)
-        norm = np.linalg.norm(fg[..., 1:], axis=-1)
-        ok = np.all(np.isfinite(fg), axis=(1, 2)) & np.all(norm > 0, axis=1)
-        a, y, fg, norm = a[ok], y[ok], fg[ok], norm[ok]
-        active[~np.isin(np.arange(len(active)), a)] = False
-        if len(a) == 0:
-            break
-        R[a], t[a], step, _ = point_to_plane_step(R[a], t[a], y, fg[..., 1:] / norm[..., None], fg[..., 0] / norm)
-        small = np.max(np.abs(step), axis=1) < 1e-12 * max(1.0, model.size)
-        active[a[small]] = False
-    y = apply_poses(R, t, x)
-    with np.errstate(all="ignore"):
-        error = np.mean(model.distance(y), axis=1)
-    return R, t, np.where(np.isfinite(error), error, np.inf)
+    """Poses ``R (h, 3, 3), t (h, 3)`` of data ``x (m, 3)`` refined by ``iterations`` steps of the one
+    point-to-plane solver on the first-order distances ``f / |grad f|`` (:meth:`ClosedFormSurface.planes`,
+    eq. 11).  Returns the poses and their errors (eq. 11, ``inf`` where ``f`` is singular)."""
+    fit = solve(model, R, t, x, Criteria(iterations, tolerance=0.0))
+    return fit.R, fit.t, fit.error
 
 
 def _result(model, geometry, R, t, error, start, candidates) -> Registration | None:

@@ -15,8 +15,9 @@ these steps, which :mod:`tactrec.methods.fast` schedules:
    principal direction onto the vertex's, either way round (``"frames"``),
    or every 30 degrees about the normal from well-defined tangents
    (``"all"``), optionally with the normal tilted four ways;
-3. :func:`refine` -- damped point-to-plane Gauss-Newton in six degrees of
-   freedom on the exact closest points (libigl's AABB tree).
+3. refinement -- damped point-to-plane Gauss-Newton in six degrees of
+   freedom on the exact closest points (libigl's AABB tree): the one solver,
+   :func:`tactrec.registration.solver.solve`.
 
 The error is eq. 12's mean distance of the data points to the model, with
 exact point-to-mesh distances in place of eq. 15's sections.
@@ -30,10 +31,10 @@ from ..estimation import LocalGeometry
 from ..linalg import compose, gram, rotate, solve_spd, stable_order, transform
 from ..surfaces.mesh import MeshModel
 from ..surfaces.mesh_curvature import fitted_frame, quadric_curvatures, tangents
-from .result import Registration, cross, local_frame, point_to_plane_step, rotations_from_vectors, rotations_z
+from .result import Registration, cross, local_frame, rotations_from_vectors, rotations_z
+from .solver import jacobian
 
-__all__ = ["places", "first_per_cell", "frame_poses", "refine", "signed_distances", "mean_distance", "registration", "data_curvatures",
-           "prepare", "starting_poses"]
+__all__ = ["places", "first_per_cell", "frame_poses", "registration", "data_curvatures", "prepare", "starting_poses"]
 
 
 def prepare(model: MeshModel) -> None:
@@ -42,67 +43,6 @@ def prepare(model: MeshModel) -> None:
     model.distance_field
     model.vertex_normals
     model.distance(model.vertices[:1])
-
-
-def mean_distance(model: MeshModel, R: np.ndarray, t: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """Exact mean distance ``(h,)`` to the mesh of ``x (m, 3)`` under each pose ``R (h, 3, 3), t (h, 3)``."""
-    return model.distance(transform(R, t, x).reshape(-1, 3)).reshape(len(R), -1).mean(axis=1)
-
-
-def _planes(model: MeshModel, moved: np.ndarray):
-    """Signed distances ``(..., )`` of ``moved (..., 3)`` to the mesh and the unit normals of the
-    planes they are measured against.
-
-    The normal is the direction from the closest point to the point, signed to agree with the
-    closest face's normal: the face normal inside a face, the bisecting direction beside an
-    edge or a corner.  It is continuous in the point, so a point whose closest face is a tie
-    between two (beside a convex edge) gets the same plane whichever face the tree reports."""
-    flat = moved.reshape(-1, 3)
-    d, face, closest = model.closest_points(flat)
-    fn = model.face_normals[face]
-    diff = flat - closest
-    side = np.where(np.sum(diff * fn, axis=1) < 0, -1.0, 1.0)
-    tiny = 1e-12 * max(model.size, 1e-300)
-    n = np.where((d > tiny)[:, None], diff * (side / np.maximum(d, tiny))[:, None], fn)
-    return (side * d).reshape(moved.shape[:-1]), n.reshape(moved.shape)
-
-
-def signed_distances(model: MeshModel, points: np.ndarray) -> np.ndarray:
-    """Signed distances of ``points (..., 3)`` to the mesh, positive on the side of the closest
-    face's normal (:func:`_planes`)."""
-    return _planes(model, np.asarray(points, dtype=np.float64))[0]
-
-
-def refine(model: MeshModel, R: np.ndarray, t: np.ndarray, x: np.ndarray, *, iterations: int,
-           tolerance: float = 1e-5, predict: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
-    """Point-to-plane Gauss-Newton (damped) on poses ``R (h, 3, 3), t (h, 3)`` of data ``x (m, 3)``.
-
-    Each step linearises the signed distances of :func:`_planes` about the current pose.
-    A pose stops once no data point moves by more than ``tolerance`` x the data's reach (its
-    largest distance from its centroid).  Returns the poses, their mean distances ``(h,)``
-    (exact; with ``predict``, those the last step's linearisation predicts, which spares a
-    last query of every point) and the number of closest-point queries made.
-    """
-    R, t = R.copy(), t.copy()
-    reach = float(np.max(np.linalg.norm(x - x.mean(axis=0), axis=1)))
-    predicted = np.zeros((len(R), len(x))) if predict else None
-    active = np.arange(len(R))
-    queries = 0
-    for _ in range(iterations):
-        moved = transform(R[active], t[active], x)                                       # (a, m, 3)
-        residual, n = _planes(model, moved)
-        queries += moved.shape[0] * moved.shape[1]
-        R[active], t[active], step, after = point_to_plane_step(R[active], t[active], moved, n, residual)
-        if predict:
-            predicted[active] = after
-        w, v = step[:, :3], step[:, 3:]
-        moves = np.linalg.norm(cross(w, moved.mean(axis=1)) + v, axis=1) + np.linalg.norm(w, axis=1) * reach
-        active = active[moves > tolerance * reach]
-        if len(active) == 0:
-            break
-    if predict:
-        return R, t, np.abs(predicted).mean(axis=1), queries
-    return R, t, mean_distance(model, R, t, x), queries + len(R) * len(x)
 
 
 def data_curvatures(geometry: LocalGeometry, x: np.ndarray, radius: float):
@@ -201,12 +141,12 @@ def starting_poses(model: MeshModel, geometry: LocalGeometry, x: np.ndarray, *, 
 def contact_spread(model: MeshModel, R: np.ndarray, t: np.ndarray, x: np.ndarray, contact: np.ndarray) -> float:
     """How well the data ``x (m, 3)`` pin the contact under pose ``R (3, 3), t (3,)``: the root of the
     trace of the moved contact's covariance (model units), from the pose's covariance
-    ``s^2 (J^T J)^-1`` at the fit (``J`` the point-to-plane Jacobian of :func:`refine`, ``s^2`` the
+    ``s^2 (J^T J)^-1`` at the fit (``J`` the point-to-plane Jacobian of :func:`tactrec.registration.solver.jacobian`, ``s^2`` the
     residuals' variance).  Large where the data leave a direction free: along a cylinder's axis,
     over a flat patch."""
     moved = transform(R[None], t[None], x)
-    residual, n = _planes(model, moved)
-    J = np.concatenate([cross(moved, n), n], axis=2)[0]                                  # (m, 6)
+    residual, n = model.planes(moved)
+    J = jacobian(moved, n)[0]                                                           # (m, 6)
     m = len(x)
     s2 = float(np.sum(residual[0] ** 2)) / max(m - 6, 1)
     JtJ = gram(J[None])[0]

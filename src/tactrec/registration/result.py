@@ -6,9 +6,9 @@ import dataclasses
 
 import numpy as np
 
-from ..linalg import compose, gram, rotate, solve_spd, transform
+from ..linalg import transform
 
-__all__ = ["Registration", "local_frame", "rotations_z", "rotations_from_vectors", "point_to_plane_step",
+__all__ = ["Registration", "local_frame", "rotations_z", "rotations_from_vectors", "cross",
            "apply_poses"]
 
 
@@ -47,6 +47,9 @@ class Registration:
         For a model the search pruned (its poses came nowhere near the best
         error so far on other models): the best score its cheap stage reached,
         model units; ``inf`` otherwise.
+    deferred : bool
+        Whether the model was left unrefined by the search (pruned or not reached before it
+        stopped), not ruled out: its error says nothing about it.
     alternatives : (k, 3, 4) float or None
         Other poses the search refined on this model (``[R | t]`` each, same convention), best
         first: where a session looks for one pose that fits several touches.
@@ -66,10 +69,13 @@ class Registration:
     cheap: float = float("inf")
     spread: float = 0.0
     alternatives: np.ndarray | None = None
+    deferred: bool = False
 
     @classmethod
-    def rejection(cls, model: str, reason: str, *, scale: float = 1.0, cheap: float = float("inf")) -> "Registration":
-        return cls(model=model, error=float("inf"), scale=scale, rejected=reason, cheap=float(cheap))
+    def rejection(cls, model: str, reason: str, *, scale: float = 1.0, cheap: float = float("inf"),
+                  deferred: bool = False) -> "Registration":
+        return cls(model=model, error=float("inf"), scale=scale, rejected=reason, cheap=float(cheap),
+                   deferred=bool(deferred))
 
     @property
     def ok(self) -> bool:
@@ -143,27 +149,3 @@ def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 def apply_poses(R: np.ndarray, t: np.ndarray, x: np.ndarray) -> np.ndarray:
     """Points ``x (m, 3)`` under each pose ``R (h, 3, 3), t (h, 3)``: ``(h, m, 3)``."""
     return transform(R, t, np.asarray(x, dtype=np.float64))
-
-
-def point_to_plane_step(R: np.ndarray, t: np.ndarray, moved: np.ndarray, normals: np.ndarray,
-                        residuals: np.ndarray):
-    """One damped Gauss-Newton (Levenberg-Marquardt) step on poses ``R (h, 3, 3), t (h, 3)``.
-
-    ``moved (h, m, 3)`` are the data points under the poses, ``normals (h, m, 3)``
-    the unit normals of the planes they are measured against and ``residuals
-    (h, m)`` their signed distances.  The step is a small rotation about the
-    origin and a translation, linearised as ``r + (y x n) . w + n . v``; the
-    damping keeps directions that a flat or cylindrical patch leaves
-    unconstrained from running away.  Returns the new poses, the steps
-    ``(h, 6)`` and the residuals the linearisation predicts after them ``(h, m)``.
-    The arithmetic is element-wise (:mod:`tactrec.linalg`): the same on every CPU.
-    """
-    J = np.empty(moved.shape[:2] + (6,))                                              # (h, m, 6)
-    J[..., :3] = cross(moved, normals)
-    J[..., 3:] = normals
-    JtJ, Jtr = gram(J, residuals)
-    damp = 1e-6 * (np.trace(JtJ, axis1=1, axis2=2)[:, None, None] / 6.0 + 1e-12)
-    step = solve_spd(JtJ + damp * np.eye(6), -Jtr)
-    dR = rotations_from_vectors(step[:, :3])
-    R, t = compose(dR, R), rotate(dR, t) + step[:, 3:]
-    return R, t, step, residuals + np.sum(J * step[:, None, :], axis=2)

@@ -393,6 +393,14 @@ class ClosedFormSurface(SurfaceModel):
         with np.errstate(all="ignore"):
             return np.abs(fg[..., 0]) / np.linalg.norm(fg[..., 1:], axis=-1)
 
+    def planes(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Signed first-order distances ``f / |grad f|`` ``(...)`` (eq. 11) and unit normals
+        ``grad f / |grad f|`` ``(..., 3)`` of ``points (..., 3)``; not finite where ``grad f`` vanishes."""
+        fg = self.implicit(np.asarray(points, dtype=np.float64), order=1)
+        norm = np.linalg.norm(fg[..., 1:], axis=-1)
+        with np.errstate(all="ignore"):
+            return fg[..., 0] / norm, fg[..., 1:] / norm[..., None]
+
     def location_error(self, estimate, truth) -> float | None:
         """``|p - p*|`` up to the surface's declared symmetries (rotations about
         the origin); ``None`` on a surface with continuous symmetries."""

@@ -236,60 +236,6 @@ class MeshModel(SurfaceModel):
     def mean_edge(self) -> float:
         return float(np.mean(self.edge_lengths))
 
-    # ------------------------------------------------------------------ table
-    def sample_vertices(self, *, theta: float = np.pi / 8, max_ring: int = 6, min_ring: int = 2,
-                        rng=None) -> np.ndarray:
-        """The paper's vertex sampling (Section 5.2.1), seeded.
-
-        Repeat: pick a random unmarked vertex ``v``; take its 6-ring; while some
-        face of the ring turns more than ``theta`` from ``v``'s normal and the
-        ring is larger than 2, shrink it by one; if no vertex of the ring is
-        marked, mark them all and keep ``v``.  Until half of the vertices are
-        marked (or every vertex has been tried once).
-        """
-        rng = np.random.default_rng(rng)
-        n = len(self.vertices)
-        marked = np.zeros(n, dtype=bool)
-        count = 0
-        samples = []
-        cos_theta = np.cos(theta)
-        vf = self.vertex_faces
-        normals = self.vertex_normals
-        fn = self.face_normals
-        for v in rng.permutation(n):
-            if count >= n / 2:
-                break
-            if marked[v]:
-                continue
-            levels = self.rings(int(v), max_ring)
-            ring = len(levels) - 1
-            while True:
-                members = np.concatenate(levels[: ring + 1])
-                faces = np.unique(vf[members].indices)
-                if ring <= min_ring or np.min(fn[faces] @ normals[v]) >= cos_theta:
-                    break
-                ring -= 1
-            if not marked[members].any():
-                marked[members] = True
-                count += len(members)
-                samples.append(int(v))
-        return np.array(samples, dtype=np.int64)
-
-    def vertex_curvatures(self, vertices, *, sizes=(30, 40, 50, 60, 70), ring: int = 6):
-        """Principal curvatures at ``vertices`` by paraboloid fits (Section 5.2.2).
-
-        Returns ``k1, k2`` (``k1 >= k2``), the medians over the fits to the
-        ``sizes`` nearest vertices of each vertex's ``ring``-ring.
-        """
-        vertices = np.atleast_1d(np.asarray(vertices, dtype=np.int64))
-        k1 = np.empty(len(vertices))
-        k2 = np.empty(len(vertices))
-        for i, v in enumerate(vertices):
-            neigh = self.ring(int(v), ring)
-            k1[i], k2[i] = paraboloid_curvatures(self.vertices[v], self.vertex_normals[v], self.vertices[neigh],
-                                                 sizes=sizes)
-        return k1, k2
-
     @cached_property
     def vertex_tree(self):
         """A k-d tree (scipy ``cKDTree``) over the vertices."""
@@ -316,13 +262,10 @@ class MeshModel(SurfaceModel):
                                self.vertex_frames(np.arange(len(self.vertices))), radius=3.0 * self.mean_edge)
 
     def table_samples(self, *, resolution=None, rng=0) -> TableSamples:
-        """The paper's mesh table: sampled vertices with fitted curvatures."""
-        sample = self.sample_vertices(rng=rng)
-        k1, k2 = self.vertex_curvatures(sample)
-        keep = np.isfinite(k1) & np.isfinite(k2)
-        sample = sample[keep]
-        return TableSamples(sample[:, None].astype(np.float64), self.vertices[sample], self.vertex_normals[sample],
-                            k1[keep], k2[keep])
+        """The paper's mesh table (Section 5.2): :func:`.mesh_table.table_samples`."""
+        from .mesh_table import table_samples
+
+        return table_samples(self, rng=rng)
 
     # ------------------------------------------------------------------ distance, sites
     @cached_property
@@ -344,6 +287,39 @@ class MeshModel(SurfaceModel):
         """Exact distance of ``points`` (..., 3) to the mesh."""
         points = np.asarray(points, dtype=np.float64)
         return self.closest_points(points)[0].reshape(points.shape[:-1])
+
+    def planes(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Signed distances ``(...)`` of ``points (..., 3)`` to the mesh and the unit normals ``(..., 3)``
+        of the planes they are measured against.
+
+        The normal is the direction from the closest point to the point, signed to agree with the
+        closest face's normal: the face normal inside a face, the bisecting direction beside an
+        edge or a corner.  It is continuous in the point, so a point whose closest face is a tie
+        between two (beside a convex edge) gets the same plane whichever face the tree reports."""
+        points = np.asarray(points, dtype=np.float64)
+        flat = points.reshape(-1, 3)
+        d, face, closest = self.closest_points(flat)
+        fn = self.face_normals[face]
+        diff = flat - closest
+        side = np.where(np.sum(diff * fn, axis=1) < 0, -1.0, 1.0)
+        tiny = 1e-12 * max(self.size, 1e-300)
+        n = np.where((d > tiny)[:, None], diff * (side / np.maximum(d, tiny))[:, None], fn)
+        return (side * d).reshape(points.shape[:-1]), n.reshape(points.shape)
+
+    def oriented_samples(self, count: int | None = None, *, rng=0) -> tuple[np.ndarray, np.ndarray]:
+        """At most ``count`` points (``None``: as many as the mesh has vertices) ``(n, 3)`` spread evenly over the faces, with the normals
+        ``(n, 3)`` interpolated from the vertex normals, seeded: trimesh's ``sample_surface_even``
+        (three times as many uniform samples, those closer than the spacing they would have
+        removed), less its warning when fewer than asked survive."""
+        import trimesh
+
+        mesh, count = self._trimesh, len(self.vertices) if count is None else count
+        points, face = trimesh.sample.sample_surface(mesh, 3 * count, seed=rng)
+        points, kept = trimesh.points.remove_close(points, float(np.sqrt(mesh.area / (3 * count))))
+        points, face = points[:count], face[kept][:count]
+        weights = trimesh.triangles.points_to_barycentric(self.vertices[self.faces[face]], points)
+        normals = np.einsum("nk,nkj->nj", weights, self.vertex_normals[self.faces[face]])
+        return points, normals / np.linalg.norm(normals, axis=1, keepdims=True)
 
     @cached_property
     def _trimesh(self):

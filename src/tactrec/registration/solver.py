@@ -1,0 +1,124 @@
+"""The one point-to-plane solver: damped Gauss-Newton on poses, for every surface model.
+
+Every refinement of a pose in ``fast`` (a touch's search, a session's joint
+fit, its pose families) and the information matrices of ``next``
+(:mod:`tactrec.proposal`) linearise the same residuals: the signed
+distances of the moved data points to the planes the model gives them
+(:meth:`planes` of a surface model: a mesh's closest-point planes, a
+closed-form surface's first-order distances ``f / |grad f|``, eq. 11).  A
+small turn ``w`` about the origin and a shift ``v`` of the model frame move
+each residual by ``(y x n) . w + n . v`` (:func:`jacobian`).
+
+The arithmetic is element-wise (:mod:`tactrec.linalg`): the same bits on
+every CPU.  The paper's own registrations (:mod:`.closedform_paper`,
+:mod:`.mesh_paper`) keep the paper's steps.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from ..linalg import compose, gram, rotate, solve_spd, transform
+from .result import cross, rotations_from_vectors
+
+__all__ = ["Criteria", "Fit", "jacobian", "step", "solve", "mean_distance"]
+
+
+@dataclasses.dataclass(frozen=True)
+class Criteria:
+    """When a refinement stops: after ``iterations`` steps, or for a pose once no data point moves by
+    more than ``tolerance`` x the data's reach (its largest distance from its centroid).  With
+    ``predict``, the errors returned are those the last step's linearisation predicts, which
+    spares a last query of every point."""
+
+    iterations: int
+    tolerance: float = 1e-5
+    predict: bool = False
+
+    def __post_init__(self):
+        if not isinstance(self.iterations, (int, np.integer)) or self.iterations < 0:
+            raise ValueError(f"iterations must be a whole number >= 0, got {self.iterations!r}")
+        if not (np.isfinite(self.tolerance) and self.tolerance >= 0):
+            raise ValueError(f"tolerance must be a number >= 0, got {self.tolerance!r}")
+
+
+@dataclasses.dataclass(frozen=True)
+class Fit:
+    """Refined poses ``R (h, 3, 3), t (h, 3)``, their mean distances ``error (h,)`` (model units; inf
+    where the model gives no plane) and the distance queries made (``queries``)."""
+
+    R: np.ndarray
+    t: np.ndarray
+    error: np.ndarray
+    queries: int
+
+    def __iter__(self):
+        """``R, t, error, queries``, so that a fit unpacks like a tuple."""
+        return iter((self.R, self.t, self.error, self.queries))
+
+
+def jacobian(moved: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """The residuals' derivatives ``(..., 6)`` at points ``moved (..., 3)`` with plane normals
+    ``normals (..., 3)``: ``(y x n, n)``, for a turn ``w`` about the origin and a shift ``v``."""
+    J = np.empty(np.broadcast_shapes(moved.shape, normals.shape)[:-1] + (6,))
+    J[..., :3] = cross(moved, normals)
+    J[..., 3:] = normals
+    return J
+
+
+def step(R: np.ndarray, t: np.ndarray, moved: np.ndarray, normals: np.ndarray, residuals: np.ndarray):
+    """One damped Gauss-Newton (Levenberg-Marquardt) step on poses ``R (h, 3, 3), t (h, 3)``.
+
+    ``moved (h, m, 3)`` are the data points under the poses, ``normals (h, m, 3)`` the unit
+    normals of their planes and ``residuals (h, m)`` their signed distances.  The damping keeps
+    directions that a flat or cylindrical patch leaves unconstrained from running away.  Returns
+    the new poses, the steps ``(h, 6)`` and the residuals the linearisation predicts after them
+    ``(h, m)``."""
+    J = jacobian(moved, normals)                                                       # (h, m, 6)
+    JtJ, Jtr = gram(J, residuals)
+    damp = 1e-6 * (np.trace(JtJ, axis1=1, axis2=2)[:, None, None] / 6.0 + 1e-12)
+    delta = solve_spd(JtJ + damp * np.eye(6), -Jtr)
+    dR = rotations_from_vectors(delta[:, :3])
+    R, t = compose(dR, R), rotate(dR, t) + delta[:, 3:]
+    return R, t, delta, residuals + np.sum(J * delta[:, None, :], axis=2)
+
+
+def mean_distance(model, R: np.ndarray, t: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Exact mean distance ``(h,)`` to ``model`` of ``x (m, 3)`` under each pose ``R (h, 3, 3), t (h, 3)``
+    (inf where the model's distance is not finite)."""
+    with np.errstate(all="ignore"):
+        d = model.distance(transform(R, t, x).reshape(-1, 3)).reshape(len(R), -1).mean(axis=1)
+    return np.where(np.isfinite(d), d, np.inf)
+
+
+def solve(model, R: np.ndarray, t: np.ndarray, x: np.ndarray, criteria: Criteria) -> Fit:
+    """Refine poses ``R (h, 3, 3), t (h, 3)`` of data ``x (m, 3)`` onto ``model`` (model units) by
+    :func:`step`, each pose stopping on its own (``criteria``), so that a pose refined in a batch
+    takes the steps it would take alone.  A pose whose planes are not finite (a closed-form
+    surface's singular point) stops where it is."""
+    R, t = np.array(R, dtype=np.float64), np.array(t, dtype=np.float64)
+    x = np.asarray(x, dtype=np.float64)
+    reach = float(np.max(np.linalg.norm(x - x.mean(axis=0), axis=1))) if len(x) else 0.0
+    predicted = np.full((len(R), len(x)), np.inf) if criteria.predict else None
+    active = np.arange(len(R))
+    queries = 0
+    for _ in range(criteria.iterations):
+        if len(active) == 0:
+            break
+        moved = transform(R[active], t[active], x)                                       # (a, m, 3)
+        residual, n = model.planes(moved)
+        queries += moved.shape[0] * moved.shape[1]
+        finite = np.all(np.isfinite(residual), axis=1) & np.all(np.isfinite(n), axis=(1, 2))
+        active, moved, residual, n = active[finite], moved[finite], residual[finite], n[finite]
+        R[active], t[active], delta, after = step(R[active], t[active], moved, n, residual)
+        if criteria.predict:
+            predicted[active] = after
+        w, v = delta[:, :3], delta[:, 3:]
+        moves = np.linalg.norm(cross(w, moved.mean(axis=1)) + v, axis=1) + np.linalg.norm(w, axis=1) * reach
+        active = active[moves > criteria.tolerance * reach]
+    if criteria.predict and criteria.iterations > 0:
+        error = np.abs(predicted).mean(axis=1)
+        return Fit(R, t, np.where(np.isfinite(error), error, np.inf), int(queries))
+    return Fit(R, t, mean_distance(model, R, t, x), int(queries + len(R) * len(x)))
