@@ -56,7 +56,7 @@ import numpy as np
 from scipy.special import erf
 
 from .registration.solver import jacobian
-from .session_result import LEADING, MASS
+from .session.result import LEADING, MASS
 from .simulation import simulate_world_touch
 
 __all__ = ["Proposal", "propose", "MASS", "LEADING"]

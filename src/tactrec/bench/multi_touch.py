@@ -57,7 +57,7 @@ import numpy as np
 
 from ..features import Touch
 from ..io.atomic import write_text_atomic
-from ..session_fit import per_touch
+from ..session.fit import per_touch
 from ..simulation import random_rigid_motion, sensor_to_world, simulate_world_touch
 from ..surfaces import BUILTIN_SETS
 from . import multi_touch_report as report
@@ -84,8 +84,7 @@ def _code_hash(strategy: str) -> str:
     """The sources a strategy's sessions run: random places never ask for a proposal, so a change
     to :mod:`tactrec.proposal` reruns ``next``'s sessions alone."""
     proposal = ("proposal.py",) if strategy == "next" else ()
-    return sources_hash(*CORE_SOURCES, "session.py", "session_fit.py", "session_pairs.py", "session_result.py",
-                        "session_family.py", *proposal, "probability.py", "bench/multi_touch.py",
+    return sources_hash(*CORE_SOURCES, "session", *proposal, "probability.py", "bench/multi_touch.py",
                         "bench/fast_vs_paper.py", "bench/scale.py")
 
 
@@ -178,7 +177,7 @@ def _session(task) -> dict:
         seconds = time.perf_counter() - start
         steps.append({"best": result.best, "correct": result.best == entry.name,
                       "confidence": result.confidence, "seconds": seconds, "slipped": list(result.slipped),
-                      "own_seconds": session.solo[-1].seconds, "stages": dict(result.stages),
+                      "own_seconds": session.records[-1].own.seconds, "stages": dict(result.stages),
                       "truth": _truth(session, entry, world2model)})
         if len(steps) >= TOUCHES:
             break

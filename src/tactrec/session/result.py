@@ -7,7 +7,7 @@ import dataclasses
 
 import numpy as np
 
-from .probability import AMBIGUOUS, Evidence
+from ..probability import AMBIGUOUS, Evidence
 
 __all__ = ["Hypothesis", "SessionResult", "MASS", "LEADING"]
 
@@ -72,7 +72,7 @@ class SessionResult:
     ``probabilities`` are theirs (sum 1); ``slipped`` the touches no model's pose fits;
     ``estimate`` the latest touch's contact, normal and curvatures in the world frame; ``stages``
     the add's ``seconds`` by part (:data:`tactrec.session.STAGES`: the touch's own search, the
-    joint fits, the searches with the other touches in the score, the pair search).
+    joint fits, the search with the other touches in the score).
     """
 
     ranking: list

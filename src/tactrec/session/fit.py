@@ -1,4 +1,4 @@
-"""Step 2 of a session (:mod:`tactrec.session`): one model's candidate poses scored on every touch,
+"""Step 2 of a session (:mod:`tactrec.session.core`): one model's candidate poses scored on every touch,
 the best refined jointly.  A stage of the recognizer's runner (:class:`tactrec.recognition.Recognizer`),
 so the models of a session are fitted in its worker processes, each model's arithmetic the same in
 any process."""
@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .linalg import transform
-from .registration.solver import Criteria, solve
+from ..linalg import transform
+from ..registration.solver import Criteria, solve
 
 __all__ = ["refine", "per_touch", "fit_stage", "JOINT_ITERATIONS", "REFINED"]
 

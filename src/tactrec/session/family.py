@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .linalg import gram
-from .registration.solver import jacobian
-from .session_fit import per_touch, refine
+from ..linalg import gram
+from ..registration.solver import jacobian
+from .fit import per_touch, refine
 
 __all__ = ["free_poses", "distinct", "FAMILY", "APART", "FREE", "FAMILY_ITERATIONS"]
 
@@ -29,7 +29,7 @@ def free_poses(session, model, best, use: np.ndarray, x: np.ndarray) -> np.ndarr
     of least curvature of the fit's point-to-plane normal matrix, below :data:`FREE` x its
     largest): each moved by a quarter and a half of the model's size both ways, refined,
     and kept if every touch used is still consistent with it (see :func:`distinct`)."""
-    from .registration.result import rotations_from_vectors
+    from ..registration.result import rotations_from_vectors
 
     moved = x @ best.rotation.T + best.translation
     n = model.planes(moved)[1]

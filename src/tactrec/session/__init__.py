@@ -1,0 +1,15 @@
+"""Sessions: several touches of one still object, recognised together.
+
+* :mod:`.core` -- :class:`Session`, the steps of an add (the module text there);
+* :mod:`.record` -- one :class:`TouchRecord` per touch, and the one fit test (:func:`fits`);
+* :mod:`.fit` -- a model's candidate poses scored on every touch and refined jointly;
+* :mod:`.family` -- the poses along the motions the touches leave free;
+* :mod:`.result` -- :class:`Hypothesis` and :class:`SessionResult`.
+"""
+
+from .core import FLOOR, STAGES, Session
+from .record import CONSISTENT_SE, TouchRecord, allowed_fit, fits
+from .result import LEADING, MASS, Hypothesis, SessionResult
+
+__all__ = ["Session", "SessionResult", "Hypothesis", "TouchRecord", "CONSISTENT_SE", "STAGES", "FLOOR", "allowed_fit",
+           "fits", "MASS", "LEADING"]

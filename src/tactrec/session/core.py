@@ -1,0 +1,343 @@
+"""Several touches of one still object: one pose per model that fits them all.
+
+A :class:`Session` keeps the touches of one object in a common *world*
+frame, one :class:`~.record.TouchRecord` per touch.  Adding a touch
+(:meth:`Session.add`) costs one recognition of that touch and a joint
+refinement (one more search only in step 5):
+
+1. the touch, moved into the world frame by its ``sensor2world`` pose, is
+   recognised on its own by the recognizer's method; each accepted model's
+   registration is then a world-to-model pose;
+2. for every model, the candidate poses are its joint pose so far (with the
+   poses along its free motions, where they were computed) and the new
+   touch's poses on it (the best and the others its search refined); each is
+   scored on all touches' points, and the best two are refined jointly
+   (point-to-plane Gauss-Newton on every point of every touch kept;
+   :mod:`.fit`, in the recognizer's worker processes); within one add, a model is fitted again
+   after the search of step 5 only from its fit and that search's poses;
+3. a touch is *consistent* with a pose when its mean distance under it is
+   within three standard errors of its own fit on that model, or of the
+   largest mean distance still a fit (:func:`tactrec.probability.fit_limit`:
+   a perfect fit's under its noise, or the method's ``floor`` x its radius on
+   noise-free data), whichever is larger: the noise of that touch decides,
+   not a fixed tolerance;
+4. a touch that no pose fitting most touches fits is reported as *slipped*
+   (the contact moved, or the object did) and left out of every fit and
+   probability, never averaged in;
+5. when the best model's pose is not consistent with every touch not set
+   aside before this one (the new touch and any step 4 now calls slipped
+   included: a pose the earlier search missed can make a good touch look
+   slipped), the new touch is searched again with every touch kept in its
+   score (:meth:`tactrec.recognition.Recognizer.recognize` with
+   ``context``), and steps 2-4 run again on its poses.  That search is the
+   engine's (:mod:`tactrec.engine`): every place of each model at every
+   rotation, screened with one point of each other touch's curves in the
+   score, so it costs about what the touch's own search costs, whatever
+   the number of touches, and reaches places the touch's curvature ranks
+   last.  It covers the models the new touch fits on its own (its own
+   search's error as good as its best model's, or as ``fit_limit``, by the
+   one fit test, :func:`~.record.fits`) whose pose does not fit every touch:
+   a model the touch does not fit cannot fit it jointly, and one whose pose
+   fits them all needs no other.  When the new touch's own search fitted no
+   model, its errors rule nothing out and every model whose pose does not
+   fit every touch is covered.  It stops once its best pose fits the
+   touches as well as their own searches fit each (the points-weighted mean
+   of each touch's best fit on any model, or of ``fit_limit``, whichever is
+   larger), and may spend the work (closest-point queries) the touch's own
+   search spent, times ``search_budget`` (its first round whatever it
+   costs).  A method that counts no work (the paper's) has no budget;
+6. the probabilities (:mod:`tactrec.probability`) come from every model's
+   distances to the points of all touches kept, under its joint pose.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+
+from ..errors import InputError
+from ..io.session import SessionTouch, rigid_pose
+from ..io.touch import TactileData
+from ..linalg import clearly_less
+from ..probability import evidence, fit_limit, residuals
+from . import family as _family
+from .fit import fit_stage
+from .record import TouchRecord, allowed_fit, fits
+from .result import Hypothesis, SessionResult
+
+__all__ = ["Session", "STAGES", "FLOOR"]
+
+#: on noise-free data a fit is within this fraction of the touch's radius, for a method without a ``floor`` of its own
+FLOOR = 1e-3
+#: the parts of an add whose seconds :attr:`SessionResult.stages` gives: the touch's own search
+#: (step 1), the joint fits (steps 2-4 and 6, each time they run) and the search with the other
+#: touches in the score (step 5)
+STAGES = ("own", "joint", "context")
+
+
+class Session:
+    """Touches of one still object, recognised together (see the module text).
+
+    Parameters
+    ----------
+    recognizer : tactrec.recognition.Recognizer
+        Holds the models and the method; it is kept between touches (nothing is rebuilt).
+    joint_search : bool
+        When the best model's pose does not fit every touch, search the new touch again with the
+        other touches' points in the score (step 5 of the module text, for a method that scores
+        a context); False keeps to step 1.
+    search_budget : float or None
+        Step 5's budget, in multiples of the work the touch's own search spent (1: an add costs
+        at most about twice the touch alone); None gives the search the method's own budget.
+    """
+
+    def __init__(self, recognizer, *, joint_search: bool = True, search_budget: float | None = 1.0):
+        if search_budget is not None and not (np.isfinite(search_budget) and search_budget >= 0):
+            raise ValueError(f"search_budget must be a non-negative number or None, not {search_budget!r}")
+        self.joint_search = joint_search
+        self.search_budget = search_budget
+        self.recognizer = recognizer
+        self.records: list[TouchRecord] = []
+        self.searches: list = []               # this add's recognitions: where new candidate poses come from
+        self._joint: dict[str, Hypothesis] = {}
+        self._fits: dict[bytes, dict[str, Hypothesis]] = {}   # this add's fits, per set of touches used
+        self.result: SessionResult | None = None
+        self._stages: dict[str, float] = {}     # this add's seconds per stage
+
+    @property
+    def features(self) -> list:
+        """Each touch's :class:`~tactrec.features.Touch` (world frame), in order."""
+        return [r.features for r in self.records]
+
+    @property
+    def world(self) -> list:
+        """Each touch's data in the world frame, in order."""
+        return [r.world for r in self.records]
+
+    def add(self, data: TactileData, sensor2world=None) -> SessionResult:
+        """Add a touch (sensor frame; ``sensor2world`` a ``(rotation, translation)`` pair or None for
+        points already in the world frame) and recognise the session again."""
+        start = time.perf_counter()
+        if sensor2world is None:
+            touch = SessionTouch(data)
+        else:
+            touch = SessionTouch(data, *rigid_pose(*sensor2world, data.source))
+        if self.records and data.units != self.records[0].given.data.units:
+            raise InputError(f"this touch is in {data.units!r}, the session in {self.records[0].given.data.units!r}",
+                             data.source)
+        world = touch.in_world()
+        slipped = set(self.result.slipped) if self.result is not None else set()
+        earlier = any(i not in slipped for i in range(len(self.records)))
+        self._stages = dict.fromkeys(STAGES, 0.0)
+        own = self._timed("own", self.recognizer.recognize, world)
+        self.records.append(TouchRecord(touch, world, own))
+        self.searches = [own]
+        self._fits = {}
+        self.result = self._joint_fit()
+        if self.joint_search and earlier and self.recognizer.method.scores_context:
+            self._search_jointly(slipped, own.work)
+        self.result = dataclasses.replace(self.result, seconds=time.perf_counter() - start, stages=self._stages)
+        return self.result
+
+    def _timed(self, stage: str, fn, *args, **kwargs):
+        """``fn(*args, **kwargs)``, its seconds added to this add's ``stage`` (:data:`STAGES`)."""
+        start = time.perf_counter()
+        try:
+            return fn(*args, **kwargs)
+        finally:
+            self._stages[stage] += time.perf_counter() - start
+
+    def _search_jointly(self, slipped: set, work: int) -> None:
+        """Step 5: unless a pose found fits every touch kept, search the new touch again with every
+        touch kept in the score, over the models it fits on its own whose pose does not fit them
+        all; it stops once a pose fits the touches as well as their own searches fit each.  ``work``:
+        what the touch's own search spent (the budget's unit)."""
+        budget = None if self.search_budget is None or work <= 0 else int(self.search_budget * work)
+        if self._explained(slipped) or (budget is not None and budget <= 0):
+            return
+        among = self._unexplained(slipped)
+        if not among:
+            return
+        use = [i for i in range(len(self.records)) if i not in slipped]
+        context = [c for i in use[:-1] for c in self.records[i].world.curves]
+        found = self._timed("context", self.recognizer.recognize, self.records[-1].world, context=context,
+                            among=among, fit=self.pooled(self._own_fits()[use], use), budget=budget)
+        self.searches.append(found)
+        self.result = self._joint_fit(found)
+
+    def kept(self) -> list[int]:
+        """The touches the session's result uses: all but those it calls slipped."""
+        slipped = () if self.result is None else self.result.slipped
+        return [i for i in range(len(self.records)) if i not in slipped]
+
+    def _points(self, touches) -> np.ndarray:
+        """How many points each of the touches ``touches`` (indices) has: ``(k,)``."""
+        return np.array([len(self.records[i].points) for i in touches], dtype=np.float64)
+
+    def pooled(self, values, touches) -> float:
+        """The points-weighted mean of per-touch ``values`` (one per index of ``touches``)."""
+        sizes = self._points(touches)
+        return float((sizes * np.asarray(values, dtype=np.float64)).sum() / sizes.sum())   # element-wise: no BLAS
+
+    def fitted_at(self, error: float, touches) -> bool:
+        """Whether a pose whose points-weighted mean distance over the touches ``touches`` (indices)
+        is ``error`` (data units) fits them as well as their noise allows (the points-weighted mean
+        of their :func:`fit_limit`, by the one fit test :func:`~.record.fits`): then no search can
+        fit them better."""
+        return bool(fits(error, self.limit(touches), self._points(touches).sum()))
+
+    def limit(self, touches) -> float:
+        """The points-weighted mean of the :func:`fit_limit` of the touches ``touches`` (indices)."""
+        return self.pooled([fit_limit(self.records[i].features, self.floor) for i in touches], touches)
+
+    def _explained(self, slipped: set) -> bool:
+        """Whether the best model's joint pose is consistent with every touch but those ``slipped``
+        before this one, the new touch included even if step 4 calls it slipped: a touch is only
+        left out as slipped once the search scoring its poses on every touch (step 5) has found
+        none that fits them all."""
+        best = self.result.hypothesis(self.result.best) if self.result.best else None
+        return best is not None and all(c for i, c in enumerate(best.consistent) if i not in slipped)
+
+    @property
+    def floor(self) -> float:
+        """The method's ``floor`` (a fit's mean distance per unit radius on noise-free data), or :data:`FLOOR`."""
+        return getattr(self.recognizer.config, "floor", FLOOR)
+
+    def _reference(self, model: str | None = None) -> np.ndarray:
+        """Per touch ``(N,)``, data units: the fit its own search reached on ``model`` (None: on its
+        best model), or :func:`fit_limit`, whichever is larger: what the fit test measures it against."""
+        return np.array([max(r.own_error(model), fit_limit(r.features, self.floor)) for r in self.records])
+
+    def _own_fits(self) -> np.ndarray:
+        """Per touch ``(N,)``: the fit its own search reached on its best model, or :func:`fit_limit`."""
+        return self._reference()
+
+    def _limits(self) -> np.ndarray:
+        """Per touch ``(N,)``, data units: the largest mean distance of a fit as good as its own search
+        found on any model (:func:`~.record.allowed_fit` of :meth:`_own_fits`)."""
+        return allowed_fit(self._own_fits(), self._points(range(len(self.records))))
+
+    def _unexplained(self, slipped: set) -> list[str]:
+        """The models step 5 searches: those whose joint pose is not consistent with every touch but
+        those ``slipped`` before, and that the new touch fits on its own (its own search's error
+        within :meth:`_limits`).  When that search fitted no model (its best error not as good as
+        :func:`fit_limit`, by the fit test), its errors rule nothing out: every model whose joint
+        pose fails some touch is searched, those it deferred unrefined included."""
+        new = self.records[-1]
+        fitted = fits(self._own_fits()[-1], fit_limit(new.features, self.floor), len(new.points))
+        limit = self._limits()[-1] if fitted else np.inf
+        out = []
+        for r in new.own.ranking:
+            h = self.result.hypothesis(r.model)
+            fits_all = h is not None and all(c for i, c in enumerate(h.consistent) if i not in slipped)
+            own = r.error / r.scale if r.ok else (np.inf if r.deferred else None)
+            if own is not None and own <= limit and not fits_all:
+                out.append(r.model)
+        return out
+
+    def next(self, *, radius: float, tolerance: float = 1.0, angle: float = 60.0, candidates: int = 48, rng=None):
+        """Where to touch next (:func:`tactrec.proposal.propose`)."""
+        from ..proposal import propose
+
+        return propose(self, radius=radius, tolerance=tolerance, angle=angle, candidates=candidates, rng=rng)
+
+    # -- the joint fit --------------------------------------------------------------------------
+
+    def _candidates(self, name: str, start: Hypothesis | None = None,
+                    searches=None) -> list[tuple[np.ndarray, np.ndarray, float]]:
+        """Model ``name``'s candidate poses ``(R, t, scale)``: ``start``'s pose (default: its joint pose
+        so far, with its family where computed), then the poses of ``searches`` (default: this add's)."""
+        poses = []
+        h = self._joint.get(name) if start is None else start
+        if h is not None:
+            family = h.poses if h.poses is not None else [np.concatenate([h.rotation, h.translation[:, None]], 1)]
+            poses += [(pose[:, :3], pose[:, 3], h.scale) for pose in family]
+        for rec in self.searches if searches is None else searches:
+            r = next((r for r in rec.ranking if r.model == name and r.ok), None)
+            if r is not None:
+                poses.append((r.rotation, r.translation, r.scale))
+                for alt in (() if r.alternatives is None else r.alternatives):
+                    poses.append((alt[:, :3], alt[:, 3], r.scale))
+        return poses
+
+    def consistent(self, name: str, per_touch: np.ndarray) -> np.ndarray:
+        """Which touches are consistent (module text, step 3) with poses of model ``name`` whose
+        per-touch mean distances (data units) are ``per_touch (h, N)``: ``(h, N)`` bool, by the one
+        fit test against each touch's own fit on the model."""
+        return fits(per_touch, self._reference(name)[None], self._points(range(len(self.records)))[None])
+
+    def _fit_models(self, use: np.ndarray, fresh=None) -> dict[str, Hypothesis]:
+        """Every model's joint pose on the touches ``use (N,)`` (bool): its candidate poses scored on
+        them, the best :data:`~.fit.REFINED` refined on their points
+        (:func:`~.fit.fit_stage`, in the recognizer's workers), the best kept.  A model
+        already fitted on these touches in this add is fitted again only from that fit and the poses
+        of ``fresh`` (the search just made): the other candidates lost to it on the same points."""
+        done = self._fits.setdefault(use.tobytes(), {})
+        entries, items = [], []
+        for i, e in enumerate(self.recognizer.models):
+            if e.name in done:
+                if fresh is None or not any(r.model == e.name and r.ok for r in fresh.ranking):
+                    continue
+                poses = self._candidates(e.name, done[e.name], [fresh])
+            else:
+                poses = self._candidates(e.name)
+            if poses:
+                entries.append((i, e))
+                items.append((np.stack([p[0] for p in poses]), np.stack([p[1] for p in poses]), poses[0][2]))
+        weight = np.array([len(f.points) for f in self.features]) * use
+        fitted = self.recognizer.runner.map(fit_stage, [i for i, _ in entries], [f.points for f in self.features],
+                                            weight, items=items)
+        for (_, e), (_, _, scale), poses in zip(entries, items, fitted):
+            best = None
+            for R, t, per in poses:
+                err = float((per * weight).sum() / max(weight.sum(), 1))
+                if best is None or clearly_less(err, best.error):
+                    best = Hypothesis(e.name, R, t, scale, err, per,
+                                      tuple(bool(c) for c in self.consistent(e.name, per[None])[0]))
+            done[e.name] = best
+        return dict(done)
+
+    def family(self, name: str) -> np.ndarray:
+        """Model ``name``'s pose and the poses along the motions its touches leave free, ``(p, 3, 4)``
+        (:func:`.family.free_poses`; computed when asked, for the models :meth:`next` weighs)."""
+        h = self._joint[name]
+        if h.poses is None:
+            model = next(e.model for e in self.recognizer.models if e.name == name)
+            kept = self.kept()
+            use = np.isin(np.arange(len(self.records)), kept)
+            x = np.concatenate([self.records[i].points for i in kept]) * h.scale
+            h = dataclasses.replace(h, poses=_family.free_poses(self, model, h, use, x))
+            self._joint[name] = h
+        return h.poses
+
+    def _joint_fit(self, fresh=None) -> SessionResult:
+        """Steps 2-4 and 6, after the search ``fresh`` of step 5 (None: after the touch's own)."""
+        return self._timed("joint", self._joint_fit_untimed, fresh)
+
+    def _joint_fit_untimed(self, fresh=None) -> SessionResult:
+        n = len(self.records)
+        every = np.ones(n, dtype=bool)
+        found = self._fit_models(every, fresh)
+        # a touch has slipped when no pose that fits most touches fits it; without such a pose
+        # the session cannot tell which touch is the odd one out
+        majority = [h for h in found.values() if 2 * sum(h.consistent) > n]
+        slipped = tuple(i for i in range(n) if not any(h.consistent[i] for h in majority)) if majority else ()
+        keep = [i for i in range(n) if i not in slipped]
+        if slipped:
+            use = np.isin(np.arange(n), keep)
+            found = self._fit_models(use, fresh)
+        self._joint = found
+        by_name = {e.name: e for e in self.recognizer.models}
+        ranked = sorted(found.values(), key=lambda h: (h.error, h.model))
+        ev = None
+        if ranked and keep:
+            x = np.concatenate([self.records[i].points for i in keep])
+            curves = [len(c) for i in keep for c in self.features[i].curves]
+            signed = [residuals(by_name[h.model].model, h.rotation, h.translation, x, h.scale) for h in ranked]
+            ev = evidence([h.model for h in ranked], signed, curves, float(np.median([f.noise for f in self.features])))
+        rejected = {e.name: "no pose from any touch" for e in self.recognizer.models if e.name not in found}
+        return SessionResult(ranked, ev, slipped, n, rejected, 0.0, self.features[-1].geometry)
+
+
