@@ -7,9 +7,9 @@
 * :mod:`.result` -- :class:`Hypothesis` and :class:`SessionResult`.
 """
 
-from .core import FLOOR, STAGES, Session
+from .core import FLOOR, STAGES, STARTS, Session
 from .record import CONSISTENT_SE, TouchRecord, allowed_fit, fits
 from .result import LEADING, MASS, Hypothesis, SessionResult
 
-__all__ = ["Session", "SessionResult", "Hypothesis", "TouchRecord", "CONSISTENT_SE", "STAGES", "FLOOR", "allowed_fit",
-           "fits", "MASS", "LEADING"]
+__all__ = ["Session", "SessionResult", "Hypothesis", "TouchRecord", "CONSISTENT_SE", "STAGES", "STARTS", "FLOOR",
+           "allowed_fit", "fits", "MASS", "LEADING"]

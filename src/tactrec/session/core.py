@@ -3,7 +3,7 @@
 A :class:`Session` keeps the touches of one object in a common *world*
 frame, one :class:`~.record.TouchRecord` per touch.  Adding a touch
 (:meth:`Session.add`) costs one recognition of that touch and a joint
-refinement (one more search only in step 5):
+refinement (more searches only in step 5):
 
 1. the touch, moved into the world frame by its ``sensor2world`` pose, is
    recognised on its own by the recognizer's method; each accepted model's
@@ -27,25 +27,37 @@ refinement (one more search only in step 5):
 5. when the best model's pose is not consistent with every touch not set
    aside before this one (the new touch and any step 4 now calls slipped
    included: a pose the earlier search missed can make a good touch look
-   slipped), the new touch is searched again with every touch kept in its
+   slipped), or is consistent with them all but not a fit under their
+   noise (its mean distance beyond the fit test's allowance over the
+   points-weighted mean of their ``fit_limit``: another pose may fit them
+   better), the new touch is searched again with every touch kept in its
    score (:meth:`tactrec.recognition.Recognizer.recognize` with
-   ``context``), and steps 2-4 run again on its poses.  That search is the
+   ``context``), and steps 2-4 run again on its poses; if still no pose fits
+   them all at their noise, the touch kept before it is searched the same
+   way with the others in its score (:data:`STARTS`).  Each search is the
    engine's (:mod:`tactrec.engine`): every place of each model at every
    rotation, screened with one point of each other touch's curves in the
-   score, so it costs about what the touch's own search costs, whatever
-   the number of touches, and reaches places the touch's curvature ranks
-   last.  It covers the models the new touch fits on its own (its own
-   search's error as good as its best model's, or as ``fit_limit``, by the
-   one fit test, :func:`~.record.fits`) whose pose does not fit every touch:
-   a model the touch does not fit cannot fit it jointly, and one whose pose
-   fits them all needs no other.  When the new touch's own search fitted no
-   model, its errors rule nothing out and every model whose pose does not
-   fit every touch is covered.  It stops once its best pose fits the
-   touches as well as their own searches fit each (the points-weighted mean
-   of each touch's best fit on any model, or of ``fit_limit``, whichever is
-   larger), and may spend the work (closest-point queries) the touch's own
-   search spent, times ``search_budget`` (its first round whatever it
-   costs).  A method that counts no work (the paper's) has no budget;
+   score, so it costs about what the touch's own search costs, whatever the
+   number of touches, and reaches places the touch's curvature ranks last.
+   But it poses the data from its start's normal, and a short noisy
+   touch's normal can be too far off for the screen to reach the truth from
+   it, where another touch's is not: so two starts, not one, and not every
+   touch (each search scores all the touches, and the cost of an add would
+   grow with the square of their number).  The searches cover the models
+   the new touch fits on its own (its own search's error as good as its
+   best model's, or as ``fit_limit``, by the one fit test,
+   :func:`~.record.fits`) whose pose does not fit every touch (every such
+   model when the best pose fits them all, but not at their noise): a model
+   the touch does not fit cannot fit it jointly.  When the new touch's own
+   search fitted no model, its errors rule nothing out and every model
+   whose pose does not fit every touch is covered.  Each search stops once
+   its best pose fits the touches as well as their own searches fit each
+   (the points-weighted mean of each touch's best fit on any model, or of
+   ``fit_limit``, whichever is larger).  They share one budget, the work
+   (closest-point queries) the touch's own search spent, times
+   ``search_budget``: each is given what is left (its first round whatever
+   it costs), and none starts once it is spent.  A method that counts no
+   work (the paper's) has no budget;
 6. the probabilities (:mod:`tactrec.probability`) come from every model's
    distances to the points of all touches kept, under its joint pose.
 """
@@ -67,10 +79,14 @@ from .fit import fit_stage
 from .record import TouchRecord, allowed_fit, fits
 from .result import Hypothesis, SessionResult
 
-__all__ = ["Session", "STAGES", "FLOOR"]
+__all__ = ["Session", "STAGES", "FLOOR", "STARTS"]
 
 #: on noise-free data a fit is within this fraction of the touch's radius, for a method without a ``floor`` of its own
 FLOOR = 1e-3
+#: step 5 searches from this many touches, newest first: the new one and the one kept before it (a
+#: noisy touch's normal may be too far off for the screen to pose the truth from it; another
+#: touch's may not), so a touch may be searched from when it is added and when the next one is
+STARTS = 2
 #: the parts of an add whose seconds :attr:`SessionResult.stages` gives: the touch's own search
 #: (step 1), the joint fits (steps 2-4 and 6, each time they run) and the search with the other
 #: touches in the score (step 5)
@@ -150,22 +166,28 @@ class Session:
             self._stages[stage] += time.perf_counter() - start
 
     def _search_jointly(self, slipped: set, work: int) -> None:
-        """Step 5: unless a pose found fits every touch kept, search the new touch again with every
-        touch kept in the score, over the models it fits on its own whose pose does not fit them
-        all; it stops once a pose fits the touches as well as their own searches fit each.  ``work``:
-        what the touch's own search spent (the budget's unit)."""
-        budget = None if self.search_budget is None or work <= 0 else int(self.search_budget * work)
-        if self._explained(slipped) or (budget is not None and budget <= 0):
-            return
-        among = self._unexplained(slipped)
-        if not among:
-            return
+        """Step 5: while no pose found fits every touch kept at their noise, search again from one of
+        them with every other touch kept in the score: the new touch, then the one kept before it
+        (:data:`STARTS`), over the models the new touch fits on its own whose pose does not fit
+        them all (every such model once the best pose fits them all but not at their noise); each
+        search stops once a pose fits the touches as well as their own searches fit each.
+        ``work``: what the touch's own search spent (the budget's unit, shared by the searches)."""
+        budget = np.inf if self.search_budget is None or work <= 0 else self.search_budget * work
         use = [i for i in range(len(self.records)) if i not in slipped]
-        context = [c for i in use[:-1] for c in self.records[i].world.curves]
-        found = self._timed("context", self.recognizer.recognize, self.records[-1].world, context=context,
-                            among=among, fit=self.pooled(self._own_fits()[use], use), budget=budget)
-        self.searches.append(found)
-        self.result = self._joint_fit(found)
+        fit = self.pooled(self._own_fits()[use], use)
+        for start in use[::-1][:STARTS]:
+            explained = self._explained(slipped)
+            if (explained and self._fitted()) or budget <= 0:
+                return
+            among = self._unexplained(slipped, every=explained)
+            if not among:
+                return
+            context = [c for i in use if i != start for c in self.records[i].world.curves]
+            found = self._timed("context", self.recognizer.recognize, self.records[start].world, context=context,
+                                among=among, fit=fit, budget=None if np.isinf(budget) else int(budget))
+            budget -= found.work
+            self.searches.append(found)
+            self.result = self._joint_fit(found)
 
     def kept(self) -> list[int]:
         """The touches the session's result uses: all but those it calls slipped."""
@@ -219,12 +241,19 @@ class Session:
         found on any model (:func:`~.record.allowed_fit` of :meth:`_own_fits`)."""
         return allowed_fit(self._own_fits(), self._points(range(len(self.records))))
 
-    def _unexplained(self, slipped: set) -> list[str]:
+    def _fitted(self) -> bool:
+        """Whether the best model's joint pose fits the touches kept as well as their noise allows
+        (:meth:`fitted_at`): then no search can fit them better."""
+        return bool(self.result.ranking) and self.fitted_at(self.result.ranking[0].error, self.kept())
+
+    def _unexplained(self, slipped: set, *, every: bool = False) -> list[str]:
         """The models step 5 searches: those whose joint pose is not consistent with every touch but
-        those ``slipped`` before, and that the new touch fits on its own (its own search's error
-        within :meth:`_limits`).  When that search fitted no model (its best error not as good as
-        :func:`fit_limit`, by the fit test), its errors rule nothing out: every model whose joint
-        pose fails some touch is searched, those it deferred unrefined included."""
+        those ``slipped`` before (``every``: whether or not it is, for a best pose consistent with
+        every touch but not a fit under their noise, which another pose may beat), and that the new
+        touch fits on its own (its own search's error within :meth:`_limits`).  When that search
+        fitted no model (its best error not as good as :func:`fit_limit`, by the fit test), its
+        errors rule nothing out: every such model is searched, those it deferred unrefined
+        included."""
         new = self.records[-1]
         fitted = fits(self._own_fits()[-1], fit_limit(new.features, self.floor), len(new.points))
         limit = self._limits()[-1] if fitted else np.inf
@@ -233,7 +262,7 @@ class Session:
             h = self.result.hypothesis(r.model)
             fits_all = h is not None and all(c for i, c in enumerate(h.consistent) if i not in slipped)
             own = r.error / r.scale if r.ok else (np.inf if r.deferred else None)
-            if own is not None and own <= limit and not fits_all:
+            if own is not None and own <= limit and (every or not fits_all):
                 out.append(r.model)
         return out
 
