@@ -57,7 +57,8 @@ refinement (more searches only in step 5):
    (closest-point queries) the touch's own search spent, times
    ``search_budget``: each is given what is left (its first round whatever
    it costs), and none starts once it is spent.  A method that counts no
-   work (the paper's) has no budget;
+   work has no budget, and one that scores no other touches' points (the
+   paper's) searches no more than step 1;
 6. the probabilities (:mod:`tactrec.probability`) come from every model's
    distances to the points of all touches kept, under its joint pose.
 """
