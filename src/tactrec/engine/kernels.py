@@ -23,7 +23,7 @@ if config.THREADING_LAYER == "default":
     # Recognizer's workers); GNU OpenMP, numba's other default, ends such a process
     config.THREADING_LAYER = "workqueue"
 
-__all__ = ["BRICK", "field_lookup", "field_gradient", "screen_rotations", "field_scores", "field_refine"]
+__all__ = ["field_lookup", "field_gradient", "screen_rotations", "field_scores", "field_refine"]
 
 
 

@@ -22,10 +22,9 @@ import numpy as np
 from ..linalg import compose, rotate, stable_order
 from ..registration.result import local_frame
 from ..surfaces.mesh_curvature import tangents
-from . import LOOKUP_COST  # noqa: F401  (re-exported: a screen's cost in queries)
 from .kernels import field_scores, screen_rotations
 
-__all__ = ["Screen", "screen", "screen_places", "data_normals", "LOOKUP_COST", "DISTINCT"]
+__all__ = ["Screen", "screen", "screen_places", "data_normals", "DISTINCT"]
 
 #: data normals closer than this (degrees) pose the data alike: the refinement reaches across it
 DISTINCT = 10.0

@@ -141,9 +141,9 @@ def starting_poses(model: MeshModel, geometry: LocalGeometry, x: np.ndarray, *, 
 def contact_spread(model: MeshModel, R: np.ndarray, t: np.ndarray, x: np.ndarray, contact: np.ndarray) -> float:
     """How well the data ``x (m, 3)`` pin the contact under pose ``R (3, 3), t (3,)``: the root of the
     trace of the moved contact's covariance (model units), from the pose's covariance
-    ``s^2 (J^T J)^-1`` at the fit (``J`` the point-to-plane Jacobian of :func:`tactrec.registration.solver.jacobian`, ``s^2`` the
-    residuals' variance).  Large where the data leave a direction free: along a cylinder's axis,
-    over a flat patch."""
+    ``s^2 (J^T J)^-1`` at the fit (``J`` the point-to-plane Jacobian,
+    :func:`tactrec.registration.solver.jacobian`; ``s^2`` the residuals' variance).  Large where
+    the data leave a direction free: along a cylinder's axis, over a flat patch."""
     moved = transform(R[None], t[None], x)
     residual, n = model.planes(moved)
     J = jacobian(moved, n)[0]                                                           # (m, 6)

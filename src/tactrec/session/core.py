@@ -175,7 +175,7 @@ class Session:
         ``work``: what the touch's own search spent (the budget's unit, shared by the searches)."""
         budget = np.inf if self.search_budget is None or work <= 0 else self.search_budget * work
         use = [i for i in range(len(self.records)) if i not in slipped]
-        fit = self.pooled(self._own_fits()[use], use)
+        fit = self.pooled(self._reference()[use], use)
         for start in use[::-1][:STARTS]:
             explained = self._explained(slipped)
             if (explained and self._fitted()) or budget <= 0:
@@ -233,14 +233,10 @@ class Session:
         best model), or :func:`fit_limit`, whichever is larger: what the fit test measures it against."""
         return np.array([max(r.own_error(model), fit_limit(r.features, self.floor)) for r in self.records])
 
-    def _own_fits(self) -> np.ndarray:
-        """Per touch ``(N,)``: the fit its own search reached on its best model, or :func:`fit_limit`."""
-        return self._reference()
-
     def _limits(self) -> np.ndarray:
         """Per touch ``(N,)``, data units: the largest mean distance of a fit as good as its own search
-        found on any model (:func:`~.record.allowed_fit` of :meth:`_own_fits`)."""
-        return allowed_fit(self._own_fits(), self._points(range(len(self.records))))
+        found on any model (:func:`~.record.allowed_fit` of :meth:`_reference`)."""
+        return allowed_fit(self._reference(), self._points(range(len(self.records))))
 
     def _fitted(self) -> bool:
         """Whether the best model's joint pose fits the touches kept as well as their noise allows
@@ -256,7 +252,7 @@ class Session:
         errors rule nothing out: every such model is searched, those it deferred unrefined
         included."""
         new = self.records[-1]
-        fitted = fits(self._own_fits()[-1], fit_limit(new.features, self.floor), len(new.points))
+        fitted = fits(self._reference()[-1], fit_limit(new.features, self.floor), len(new.points))
         limit = self._limits()[-1] if fitted else np.inf
         out = []
         for r in new.own.ranking:

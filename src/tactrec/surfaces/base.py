@@ -7,8 +7,6 @@ A closed-form surface and a triangle mesh answer the same questions:
 * :meth:`SurfaceModel.distance` -- distance of points to the surface (eq. 8);
 * :meth:`SurfaceModel.planes` -- signed distances and the planes they are
   measured against, what a point-to-plane step linearises;
-* :meth:`SurfaceModel.oriented_samples` -- points spread over the surface with
-  their outward normals;
 * :meth:`SurfaceModel.plane_section` -- points of a plane section at equal
   arc-length spacing, for simulated touches (Sections 4.3 and 5.4).
 
@@ -109,14 +107,6 @@ class SurfaceModel(abc.ABC):
     @abc.abstractmethod
     def random_sites(self, count: int, *, rng=None) -> np.ndarray:
         """``count`` random sites, roughly uniform over the surface."""
-
-    def oriented_samples(self, count: int | None = None, *, rng=0) -> tuple[np.ndarray, np.ndarray]:
-        """About ``count`` points ``(n, 3)`` spread over the surface and their outward unit normals
-        ``(n, 3)``, seeded (``None``: as many as the model's resolution gives, here 6000): the
-        frames of :meth:`random_sites`."""
-        count = 6000 if count is None else count
-        frames = [self.site_frame(s) for s in self.random_sites(count, rng=np.random.default_rng(rng))]
-        return np.array([f.point for f in frames]), np.array([f.normal for f in frames])
 
     @property
     @abc.abstractmethod

@@ -306,21 +306,6 @@ class MeshModel(SurfaceModel):
         n = np.where((d > tiny)[:, None], diff * (side / np.maximum(d, tiny))[:, None], fn)
         return (side * d).reshape(points.shape[:-1]), n.reshape(points.shape)
 
-    def oriented_samples(self, count: int | None = None, *, rng=0) -> tuple[np.ndarray, np.ndarray]:
-        """At most ``count`` points (``None``: as many as the mesh has vertices) ``(n, 3)`` spread evenly over the faces, with the normals
-        ``(n, 3)`` interpolated from the vertex normals, seeded: trimesh's ``sample_surface_even``
-        (three times as many uniform samples, those closer than the spacing they would have
-        removed), less its warning when fewer than asked survive."""
-        import trimesh
-
-        mesh, count = self._trimesh, len(self.vertices) if count is None else count
-        points, face = trimesh.sample.sample_surface(mesh, 3 * count, seed=rng)
-        points, kept = trimesh.points.remove_close(points, float(np.sqrt(mesh.area / (3 * count))))
-        points, face = points[:count], face[kept][:count]
-        weights = trimesh.triangles.points_to_barycentric(self.vertices[self.faces[face]], points)
-        normals = np.einsum("nk,nkj->nj", weights, self.vertex_normals[self.faces[face]])
-        return points, normals / np.linalg.norm(normals, axis=1, keepdims=True)
-
     @cached_property
     def _trimesh(self):
         import trimesh
