@@ -19,12 +19,15 @@ import dataclasses
 
 import numpy as np
 
-from ..linalg import compose, rotate, stable_order
-from ..registration.result import local_frame
+from ..linalg import compose, rotate, stable_order, transform
+from ..registration.result import local_frame, rotations_from_vectors
 from ..surfaces.mesh_curvature import tangents
 from .kernels import field_scores, screen_rotations
 
-__all__ = ["Screen", "screen", "screen_places", "data_normals", "DISTINCT"]
+__all__ = ["Screen", "screen", "screen_places", "data_normals", "tilted_normals", "local_screen", "DISTINCT", "LOCAL_STEPS"]
+
+#: values of each turn and shift of :func:`local_screen`'s grid about a pose (``LOCAL_STEPS**6`` poses)
+LOCAL_STEPS = 5
 
 #: data normals closer than this (degrees) pose the data alike: the refinement reaches across it
 DISTINCT = 10.0
@@ -87,19 +90,65 @@ def data_normals(geometry, fitted: np.ndarray, *, distinct: float) -> list[np.nd
     return out
 
 
+def tilted_normals(normal: np.ndarray, reference: np.ndarray, *, cone: float, step: float) -> list[np.ndarray]:
+    """Data normals tilted off ``normal (3,)`` on rings ``step, 2 step, ...`` degrees out to ``cone``,
+    each ring at about ``step`` apart (at least six), azimuth 0 towards ``reference (3,)``: the
+    hypotheses of a contact whose normal the data do not give (a sharp or thin feature, where any
+    fit of the curves is tens of degrees off the surface's normal).  The untilted normal is not
+    among them."""
+    L = local_frame(np.asarray(normal, dtype=np.float64), np.asarray(reference, dtype=np.float64))   # rows t1 t2 N
+    out = []
+    for ring in np.arange(1, int(np.floor(cone / step + 1e-9)) + 1) * np.deg2rad(step):
+        count = max(6, int(round(2.0 * np.pi * np.sin(ring) / np.deg2rad(step))))
+        for a in 2.0 * np.pi * np.arange(count) / count:
+            v = np.array([np.sin(ring) * np.cos(a), np.sin(ring) * np.sin(a), np.cos(ring)])
+            out.append(v[0] * L[0] + v[1] * L[1] + v[2] * L[2])                         # element-wise: no BLAS
+    return out
+
+
+def local_screen(model, R: np.ndarray, t: np.ndarray, x: np.ndarray, contact: np.ndarray, *, angle: float,
+                 shift: float, steps: int = LOCAL_STEPS) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """A dense grid about each pose ``R (s, 3, 3), t (s, 3)``: turns of up to ``angle`` degrees about
+    the three axes through the contact's image and shifts of up to ``shift`` along them, ``steps``
+    values of each (``steps**6`` poses a seed), scored on the field by the data ``x (m, 3)``.  It
+    bridges the gap between a coarse grid of hypotheses (places, tilts) and the basin of the
+    Gauss-Newton steps, which on a faceted surface is a few degrees wide.  Returns each seed's best
+    pose ``R (s, 3, 3), t (s, 3)``, its field score ``(s,)`` and the lookups spent."""
+    a = np.deg2rad(np.linspace(-angle, angle, steps))
+    turns = rotations_from_vectors(np.stack(np.meshgrid(a, a, a, indexing="ij"), -1).reshape(-1, 3))
+    d = np.linspace(-shift, shift, steps)
+    shifts = np.stack(np.meshgrid(d, d, d, indexing="ij"), -1).reshape(-1, 3)
+    eye = np.ascontiguousarray(np.broadcast_to(np.eye(3), (len(shifts), 3, 3)))
+    field = model.distance_field
+    Rb, tb, sb = np.empty_like(R), np.empty_like(t), np.empty(len(R))
+    for s in range(len(R)):
+        pivot = rotate(R[s], contact) + t[s]
+        turned_R = compose(turns, R[s][None])
+        turned = np.ascontiguousarray(transform(turned_R, np.zeros((len(turns), 3)), x - contact))  # (r, m, 3)
+        scores = field_scores(*field.args(), eye, np.ascontiguousarray(pivot + shifts), turned)
+        flat = stable_order(scores.ravel().astype(np.float64))[0]
+        i, j = divmod(int(flat), scores.shape[1])
+        Rb[s] = turned_R[j]
+        tb[s] = pivot + shifts[i] - rotate(Rb[s], contact)
+        sb[s] = scores[i, j]
+    return Rb, tb, sb, int(len(R) * len(turns) * len(shifts) * len(x))
+
+
 def screen(model, geometry, vertices: np.ndarray, normals: np.ndarray, curves, normal: np.ndarray, *, stages,
            keep: int, extra: np.ndarray | None = None) -> Screen:
     """Screen the data ``curves`` (data frame) at the spots ``vertices (n,)``, ``normals (n, 3)`` of a
-    mesh model: the data ``normal (3,)`` onto the spot's normal, ``geometry.contact`` onto the
-    vertex, turned about it.  ``stages``, coarse to fine, are ``(rotations, points a curve, share
-    kept)``: each scores the spots the last kept at ``rotations`` equal turns on that many points
-    of each curve (:func:`_ends`) and keeps that share of them (at least ``keep``); the last
-    stage's best ``keep`` spots go on, each at its best turn, ordered by score (near-equal scores
-    by index: :func:`tactrec.linalg.stable_order`).  ``owner`` indexes the spots.  ``extra (k, 3)``:
+    mesh model: a data ``normal (3,)`` (or each of ``(k, 3)``) onto the spot's normal,
+    ``geometry.contact`` onto the vertex, turned about it.  ``stages``, coarse to fine, are
+    ``(rotations, points a curve, share kept)``: each scores the spots the last kept at
+    ``rotations`` equal turns (about each data normal) on that many points of each curve
+    (:func:`_ends`) and keeps that share of them (at least ``keep``); the last stage's best
+    ``keep`` spots go on, each at its best normal and turn, ordered by score (near-equal scores by
+    index: :func:`tactrec.linalg.stable_order`).  ``owner`` indexes the spots.  ``extra (k, 3)``:
     points scored at every stage besides the curves' (a session's other touches, one point a
     curve: the screen then costs about what the touch alone costs)."""
     field = model.distance_field
-    L0 = local_frame(normal, geometry.tangents[0])                                      # rows t1, t2, N
+    data = np.asarray(normal, dtype=np.float64).reshape(-1, 3)
+    L0 = np.stack([local_frame(n, geometry.tangents[0]) for n in data])                # (k, 3, 3) rows t1, t2, N
     d1, d2 = tangents(normals)
     frames_all = np.ascontiguousarray(np.stack([d1, d2, normals], axis=2))              # (n, 3, 3) columns
     alive = np.arange(len(vertices))
@@ -107,20 +156,20 @@ def screen(model, geometry, vertices: np.ndarray, normals: np.ndarray, curves, n
     for k, (rotations, per_curve, share) in enumerate(stages):
         frames = np.ascontiguousarray(frames_all[alive])
         points = _ends(curves, per_curve) if extra is None else np.concatenate([_ends(curves, per_curve), extra])
-        local = np.ascontiguousarray(rotate(L0, points - geometry.contact))             # element-wise: no BLAS
-        turned = screen_rotations(local, rotations)
+        turned = np.concatenate([screen_rotations(np.ascontiguousarray(rotate(L, points - geometry.contact)),
+                                                  rotations) for L in L0])              # element-wise: no BLAS
         scores = field_scores(*field.args(), frames, np.ascontiguousarray(model.vertices[vertices[alive]]), turned)
-        lookups += scores.size * len(local)
+        lookups += scores.size * len(points)
         last = k == len(stages) - 1
         chosen = _best_places(scores, keep if last else max(keep, int(np.ceil(share * len(alive)))))
         if not last:
             alive = alive[chosen]
-    turn = np.argmin(scores[chosen], axis=1)
-    score = scores[chosen, turn].astype(np.float64)
+    which, turn = np.divmod(np.argmin(scores[chosen], axis=1), rotations)
+    score = scores[chosen, which * rotations + turn].astype(np.float64)
     angle = 2.0 * np.pi * turn / rotations
     c, s = np.cos(angle), np.sin(angle)
     Rz = np.zeros((len(chosen), 3, 3))
     Rz[:, 0, 0], Rz[:, 0, 1], Rz[:, 1, 0], Rz[:, 1, 1], Rz[:, 2, 2] = c, -s, s, c, 1.0
-    R = compose(compose(frames[chosen], Rz), L0[None])
+    R = compose(compose(frames[chosen], Rz), L0[which])
     t = model.vertices[vertices[alive[chosen]]] - rotate(R, geometry.contact)
     return Screen(R, t, score, alive[chosen], int(lookups))

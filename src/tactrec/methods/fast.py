@@ -7,7 +7,11 @@ best matches the data's, posed by their principal frames; then every place
 at every rotation, screened on the model's distance field
 (:mod:`tactrec.engine.screen`), the best 500 places by curvature first and
 then the rest: the curvature index orders the places, it does not filter
-them.  A tier on a set of models is
+them; last, every place again with the data's normal tilted every
+``tilt_step`` degrees out to 60, for a contact on a sharp or thin feature,
+where no fit of the curves gives the surface's normal (each of its best
+seeds then set on a dense local grid of turns and shifts, which bridges the
+tilts' grid and the basin of the exact steps).  A tier on a set of models is
 
 1. *cheap stage* (per model, :func:`_cheap`): the tier's new hypotheses are
    posed from frames (:func:`tactrec.registration.mesh_fast.frame_poses`) and
@@ -74,7 +78,8 @@ from ..probability import fit_limit, fit_standard_error
 from ..registration import closedform_fast, mesh_fast
 from ..registration.result import Registration
 from .base import NOT_SEARCHED, Config, SearchOutcome
-from .fast_stages import _cheap, _closed_form, _polished, _refined, tier_span
+from .common import in_model_units
+from .fast_stages import _cheap, _closed_form, _polished, _refined, field_stages, tier_span
 
 __all__ = ["FastMethod", "FastConfig", "Tier", "TIERS", "tier_cost"]
 
@@ -84,7 +89,9 @@ class Tier:
     """One step of the schedule: the best ``places`` places per model and normal (None: every
     vertex), posed by their principal ``"frames"`` or at ``"all"`` 30-degree rotations, with the
     normal as estimated or also ``tilt`` degrees off four ways; or every place at every rotation,
-    screened on the model's distance field (``"field"``: :mod:`tactrec.engine.screen`)."""
+    screened on the model's distance field (``"field"``: :mod:`tactrec.engine.screen`), with the
+    data's normals or, for ``tilt > 0``, with normals tilted every ``tilt_step`` degrees out to
+    ``tilt`` (:func:`tactrec.engine.screen.tilted_normals`)."""
 
     places: int | None
     rotations: str = "frames"
@@ -100,7 +107,7 @@ class Tier:
 
 
 #: the default schedule, coarse to fine
-TIERS = (Tier(24), Tier(500, "field"), Tier(None, "field"))
+TIERS = (Tier(24), Tier(500, "field"), Tier(None, "field"), Tier(None, "field", 60.0))
 #: the exhaustive reference: every vertex, every 30 degrees
 EXHAUSTIVE = (Tier(None, "all"),)
 
@@ -110,7 +117,7 @@ class FastConfig(Config):
     """Options of the ``fast`` method (see the module text)."""
 
     tiers: tuple = TIERS
-    budget: int = 200_000
+    budget: int = 300_000
     spread: float = 4.0
     coarse_points: int = 5
     cheap_steps: int = 2
@@ -129,6 +136,7 @@ class FastConfig(Config):
     screen_stages: tuple = ((36, 2, 0.05), (72, 4, 1.0))
     screen_keep: int = 96
     field_steps: int = 6
+    tilt_step: float = 20.0
 
     def __post_init__(self):
         tiers = tuple(self.tiers)
@@ -148,6 +156,7 @@ class FastConfig(Config):
         self._check("screen_stages", len(stages) > 0 and all(r >= 1 and p >= 2 and 0 < f <= 1 for r, p, f in stages),
                     "a non-empty tuple of (rotations >= 1, points a curve >= 2, share kept in (0, 1])")
         self._check("screen_step", np.isfinite(self.screen_step) and self.screen_step > 0, "a positive number")
+        self._check("tilt_step", np.isfinite(self.tilt_step) and 0 < self.tilt_step < 90, "in (0, 90) degrees")
         self._check("screen_keep", isinstance(self.screen_keep, (int, np.integer)) and self.screen_keep >= 1,
                     "a whole number >= 1")
 
@@ -165,15 +174,24 @@ def tier_cost(config: FastConfig, k: int, signs: int, places: int, curves: int =
     tier = config.tiers[k]
     if tier.rotations == "field":
         start, stop = tier_span(config.tiers, k)
+        # a contact on a feature is screened with two data normals (engine.screen.data_normals); a
+        # tilted tier screens all its tilted normals at once and sets its best seeds on a local grid
+        normals, screens, local = 1, 2, 0
+        if tier.tilt > 0:
+            from ..engine.screen import LOCAL_STEPS, tilted_normals
+
+            normals = len(tilted_normals(np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0]), cone=tier.tilt,
+                                         step=config.tilt_step))
+            screens = 1
+            local = config.refine * LOCAL_STEPS ** 6 * config.coarse_points * curves * LOOKUP_COST
         lookups, alive = 0, max(0, min(places, stop if stop is not None else places) - start)
-        for rotations, per_curve, share in config.screen_stages:
-            lookups += alive * rotations * (per_curve * curves + context)
+        for rotations, per_curve, share in field_stages(config, tier):
+            lookups += alive * normals * rotations * (per_curve * curves + context)
             alive = min(alive, max(config.screen_keep, int(np.ceil(share * alive))))
         lookups += config.screen_keep * (config.field_steps + 1) * 3 * config.coarse_points * curves
         exact = 2 * config.refine * config.coarse_points * curves
         refine = config.refine * config.iterations * curves * 3 * config.coarse_points
-        # twice: a contact on a feature is screened with two data normals (engine.screen.data_normals)
-        return int(2 * signs * (lookups * LOOKUP_COST + exact) + refine)
+        return int(signs * (screens * (lookups * LOOKUP_COST + exact) + local) + refine)
     start, stop = tier_span(config.tiers, k)
     count = max(0, min(places, stop if stop is not None else places) - start)
     poses = count * signs * (2 if tier.rotations == "frames" else 12) * (5 if tier.tilt > 0 else 1)
@@ -194,10 +212,24 @@ class _State:
         self.tried = {i: 0 for i in meshes}
         self.next = {i: 0 for i in meshes}
         self.sizes = {i: len(models[i].model.vertices) for i in meshes}
+        self.models, self.spots = models, {}
         self.limit = max(fit_limit(touch, config.floor), touch.fit)      # a caller's joint fit, with a context
         # a best error this far above the limit may still be a fit under the noise; beyond it the true
         # pose was missed somewhere, and no model's first tiers rule it out
         self.plausible = self.limit + config.within * fit_standard_error(self.limit, len(touch.joint_points))
+
+    def places(self, i: int, k: int) -> int:
+        """How many places tier ``k`` takes on model ``i``: its vertices, or in a field tier one a grid
+        cell (:func:`tactrec.engine.screen.screen_places`): a surface of area ``A`` meets about
+        ``1.5 A / size^2`` cells (the mean of ``|n_x| + |n_y| + |n_z|`` over directions), and no more
+        cells than it has vertices."""
+        if self.config.tiers[k].rotations != "field":
+            return self.sizes[i]
+        if i not in self.spots:
+            model = self.models[i].model
+            size = max(self.config.screen_step * in_model_units(self.touch, model).radius, 1e-12)
+            self.spots[i] = min(self.sizes[i], int(np.ceil(1.5 * model.area / size ** 2)))
+        return self.spots[i]
 
     def error(self, i: int) -> float:
         return _error(self.best.get(i))
@@ -290,7 +322,7 @@ class FastMethod:
                 break
             k = state.next[group[0]]
             group = [i for i in group if state.next[i] == k]
-            cost = sum(tier_cost(config, k, signs, state.sizes[i], len(touch.curves), len(touch.context))
+            cost = sum(tier_cost(config, k, signs, state.places(i, k), len(touch.curves), len(touch.context))
                        for i in group)
             # the budget bounds the poses tried: work on other touches' points (a context) counts as
             # the touch's own share of the points scored, as a round's cost is counted

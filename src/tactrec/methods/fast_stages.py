@@ -21,7 +21,7 @@ from .common import best_of_orientations, in_model_units
 if TYPE_CHECKING:
     from .fast import FastConfig
 
-__all__ = ["tier_span"]
+__all__ = ["tier_span", "field_stages"]
 
 def _places(held, index: int, touch, sign: int, config: FastConfig, every: bool):
     """The model's places in order for this touch and normal, computed once per touch."""
@@ -59,6 +59,53 @@ def tier_span(tiers, k: int) -> tuple[int, int | None]:
     return start, tier.places
 
 
+def field_stages(config: FastConfig, tier) -> tuple:
+    """A field tier's screen stages: ``config.screen_stages``, or in a tilted tier two stages turning
+    the data every ``tilt_step`` degrees and then twice as finely, matching the tilts' grid."""
+    if tier.tilt <= 0:
+        return config.screen_stages
+    turns = max(1, int(round(360.0 / config.tilt_step)))
+    return (turns, *config.screen_stages[0][1:]), (2 * turns, *config.screen_stages[-1][1:])
+
+
+def _field_poses(model, t, g, spots: np.ndarray, fit, tier, config: FastConfig, context):
+    """A field tier's hypotheses at the places ``spots``: screened on the field with the data's normals
+    (or, in a tilted tier, with normals tilted out to ``tier.tilt`` degrees, then each of the best
+    few set on a dense local grid: :func:`tactrec.engine.screen.local_screen`), the best
+    ``screen_keep`` refined on the field and the best ``2 refine`` of those taking one exact step.
+    Returns ``R, t, score, queries, hypotheses screened``."""
+    from ..engine.kernels import field_refine            # numba: only once a search needs it
+    from ..engine.screen import DISTINCT, data_normals, local_screen, screen, tilted_normals
+
+    stages = field_stages(config, tier)
+    if tier.tilt > 0:        # one screen over every tilted normal
+        normals = [np.stack(tilted_normals(fit[2], g.tangents[0], cone=tier.tilt, step=config.tilt_step))]
+    else:
+        normals = data_normals(g, fit[2], distinct=DISTINCT)
+    x3, poses, lookups, q, tried = t.joint_subset(3 * config.coarse_points), [], 0, 0, 0
+    for dn in normals:
+        found = screen(model, g, spots, model.fine_curvatures.normal[spots], t.curves, dn,
+                       stages=stages, keep=config.screen_keep, extra=context)
+        R, tr, grid = field_refine(*model.distance_field.args(), found.R, found.t, x3, config.field_steps)
+        lookups += found.lookups + len(R) * len(x3) * (config.field_steps + 1)
+        tried += len(found.owner)
+        best = stable_order(grid)[:2 * config.refine]
+        poses.append(solve(model, R[best], tr[best], t.joint_subset(config.coarse_points),
+                           Criteria(1, tolerance=config.tolerance, predict=True)))
+        q += poses[-1].queries
+    R, tr, score = (np.concatenate([getattr(p, k) for p in poses]) for k in ("R", "t", "error"))
+    if tier.tilt > 0:
+        seeds = stable_order(score)[:config.refine]
+        R, tr, _, n = local_screen(model, R[seeds], tr[seeds], t.joint_subset(config.coarse_points), g.contact,
+                                   angle=0.6 * config.tilt_step,
+                                   shift=0.75 * config.screen_step * t.radius)
+        lookups += n
+        R, tr, score, q2 = solve(model, R, tr, t.joint_subset(config.coarse_points),
+                                 Criteria(1, tolerance=config.tolerance, predict=True))
+        q += q2
+    return R, tr, score, int(lookups * LOOKUP_COST) + q, tried
+
+
 def _cheap(held, indices, touch, config: FastConfig, k: int) -> list[dict]:
     """Step 1 of tier ``k`` on each mesh model: its best ``refine`` poses and their cheap scores."""
     tier = config.tiers[k]
@@ -75,26 +122,13 @@ def _cheap(held, indices, touch, config: FastConfig, k: int) -> list[dict]:
         for sign, g in zip((1, -1), t.orientations):
             chosen, fit = _places(held, index, t, sign, config, tier.places is None)
             if tier.rotations == "field":
-                from ..engine.kernels import field_refine            # numba: only once a search needs it
-                from ..engine.screen import DISTINCT, data_normals, screen
-
                 start, stop = tier_span(config.tiers, k)
                 spots = _screen_places(held, index, t, sign, config)[start:stop]
                 if len(spots) == 0:
                     continue
-                for dn in data_normals(g, fit[2], distinct=DISTINCT):
-                    found = screen(model, g, spots, model.fine_curvatures.normal[spots], t.curves, dn,
-                                   stages=config.screen_stages, keep=config.screen_keep, extra=context_middles)
-                    tried += len(found.owner)
-                    x3 = t.joint_subset(3 * config.coarse_points)
-                    R, tr, grid = field_refine(*model.distance_field.args(), found.R, found.t, x3,
-                                               config.field_steps)
-                    queries += (found.lookups + len(R) * len(x3) * (config.field_steps + 1)) * LOOKUP_COST
-                    best = stable_order(grid)[:2 * config.refine]
-                    R, tr, score, q = solve(model, R[best], tr[best], x,
-                                            Criteria(1, tolerance=config.tolerance, predict=True))
-                    queries += q
-                    poses.append((R, tr, score, np.full(len(R), sign)))
+                R, tr, score, q, n = _field_poses(model, t, g, spots, fit, tier, config, context_middles)
+                tried, queries = tried + n, queries + q
+                poses.append((R, tr, score, np.full(len(R), sign)))
                 continue
             start, stop = tier_span(config.tiers, k)
             for lo in range(start, len(chosen) if stop is None else min(stop, len(chosen)), 1000):

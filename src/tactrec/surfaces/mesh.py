@@ -227,6 +227,12 @@ class MeshModel(SurfaceModel):
         return float(np.linalg.norm(self.bounds[1] - self.bounds[0]))
 
     @cached_property
+    def area(self) -> float:
+        """The surface's area (model units squared)."""
+        v = self.vertices[self.faces]
+        return float(0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1).sum())
+
+    @cached_property
     def edge_lengths(self) -> np.ndarray:
         """``(F, 3)`` lengths of each face's edges (shared edges counted once per face)."""
         f = self.faces
