@@ -1,0 +1,81 @@
+"""The ``tactrec bench`` command: which options each benchmark takes, then the run."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from .errors import InputError
+
+__all__ = ["cmd_bench", "PAPER_OPTION_BENCHMARKS", "SCAN_KINDS"]
+
+
+#: benchmarks that take the ``paper`` method's readings (``--paper-option``)
+PAPER_OPTION_BENCHMARKS = ("paper-example", "paper-table2", "paper-table3", "paper-table6", "paper-fig11")
+
+
+def _known(values: list, known, what: str, option: str, name: str) -> tuple:
+    """``values`` (an option's comma-separated list) as a tuple, each one of ``known`` (an empty
+    item, as from ``--sets ''``, is not)."""
+    unknown = [x for x in values if x not in known]
+    if unknown:
+        raise InputError(f"unknown {what} {unknown[0]!r}; {name} has {', '.join(known)}", option)
+    return tuple(values)
+
+
+#: the benchmarks that take ``--scans``, and which kinds each takes
+SCAN_KINDS = {**{name: ("shipped", "paper-like") for name in ("paper-fig11", "paper-table6", "paper-steps")},
+              **{name: ("shipped", "other") for name in ("fast-vs-paper", "fit-limit", "field")}}
+
+
+def cmd_bench(args) -> int:
+    from .bench import BENCHMARKS
+
+    if args.name not in BENCHMARKS:
+        raise InputError(f"unknown benchmark; available: {', '.join(sorted(BENCHMARKS))}", args.name)
+    out = Path(args.out) if args.out else Path("bench-out")
+    extra = {}
+    if args.scans is not None:
+        kinds = SCAN_KINDS.get(args.name)
+        if kinds is None:
+            raise InputError(f"--scans applies to {', '.join(SCAN_KINDS)} only", args.name)
+        if args.scans not in kinds:
+            raise InputError(f"{args.name} takes --scans {' or '.join(kinds)}, not {args.scans}", args.name)
+    for option, value in (("--delta-only", args.delta_only or None), ("--lengths", args.lengths),
+                          ("--angles", args.angles)):
+        if value is not None and args.name != "paper-fig11":
+            raise InputError(f"{option} applies to paper-fig11 only", args.name)
+    if args.paper_option and args.name not in PAPER_OPTION_BENCHMARKS:
+        raise InputError(f"--paper-option applies to {', '.join(PAPER_OPTION_BENCHMARKS)} only", args.name)
+    if args.delta_only and (args.lengths or args.angles):
+        raise InputError("--delta-only leaves l and phi at the defaults; give it or --lengths/--angles", args.name)
+    if args.scans is not None:
+        extra["scans"] = args.scans
+    if args.sets is not None:
+        from .bench.calibration import SETS as CALIBRATION_SETS
+        from .bench.multi_touch import SETS as SESSION_SETS
+
+        known = {"calibration": CALIBRATION_SETS, "multi-touch": SESSION_SETS}.get(args.name)
+        if known is None:
+            raise InputError("--sets applies to calibration and multi-touch only", args.name)
+        extra["sets"] = _known(args.sets, known, "set", "--sets", args.name)
+    if args.strategies is not None:
+        from .bench.multi_touch import STRATEGIES
+
+        if args.name != "multi-touch":
+            raise InputError("--strategies applies to multi-touch only", args.name)
+        extra["strategies"] = _known(args.strategies, STRATEGIES, "strategy", "--strategies", args.name)
+    if args.paper_option:
+        extra["options"] = dict(args.paper_option)
+    if args.delta_only or args.lengths or args.angles:
+        from .bench.paper_fig11 import DEFAULTS, SWEEPS
+
+        defaults = args.delta_only
+        extra["sweeps"] = {"delta": SWEEPS["delta"],
+                           "length": [DEFAULTS["length"]] if defaults else args.lengths or SWEEPS["length"],
+                           "angle": [DEFAULTS["angle"]] if defaults else args.angles or SWEEPS["angle"]}
+    table = BENCHMARKS[args.name](out=out, instances=args.instances, seed=args.seed, jobs=args.jobs,
+                                  quiet=args.quiet, method=args.method, **extra)
+    print(table["text"])
+    written = out / (table.get("benchmark", args.name) + ".json")
+    print(f"wrote {written}" + "".join(f", {p}" for p in table.get("plots", [])))
+    return 0
