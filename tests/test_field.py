@@ -175,3 +175,27 @@ def test_a_local_screen_keeps_a_coarse_pose_within_the_exact_steps_reach():
         assert moved <= 12.0 * np.sqrt(3) + 1e-6
         fitted += solve(model, Rb, tb, touch.points, Criteria(20)).error[0] < 0.005
     assert fitted >= 18
+
+
+def test_the_preload_loads_every_kernel_a_search_calls(scans):
+    """``engine.preload`` (what ``tactrec recognize`` runs while its database loads) leaves every
+    kernel compiled for the argument types a search passes: a search adds no signature."""
+    from tactrec.engine import kernels, preload
+    from tactrec.recognition import Recognizer
+    from tactrec.simulation import simulate_random_touch
+
+    preload().join()
+    names = ("field_lookup", "field_gradient", "screen_rotations", "field_scores", "field_refine")
+    loaded = {name: list(getattr(kernels, name).signatures) for name in names}
+    assert all(len(s) == 1 for s in loaded.values())
+    depth = 0
+    with Recognizer(scans.entries) as recognizer:
+        for seed in range(10):                                        # until a search screens on the fields
+            touch = simulate_random_touch(scans.entries[seed % len(scans.entries)].model,
+                                          rng=np.random.default_rng(seed), points=41, spacing=0.3, angle=30.0,
+                                          noise=0.05, noise_kind="gaussian", outward=False)
+            depth = recognizer.recognize(touch).depth
+            if depth >= 2:
+                break
+    assert depth >= 2
+    assert {name: list(getattr(kernels, name).signatures) for name in names} == loaded

@@ -119,6 +119,7 @@ def _recognition_options(args) -> dict:
 
 def cmd_recognize(args) -> int:
     from .database import open_models
+    from .engine import preload
     from .io.touch import load_touch
     from .methods import get_method
     from .recognition import Recognizer, default_workers
@@ -129,10 +130,15 @@ def cmd_recognize(args) -> int:
     from .io.session import is_session_file, load_session
 
     get_method(args.method).configure(**_recognition_options(args))    # a bad option before any work
-    # validate everything first; a session file is recognised as one object, one pose
-    inputs = [load_session(path) if is_session_file(path) else load_touch(path) for path in args.data]
-    db = open_models(db=args.db, models=args.models, warn=_warn, quiet=args.quiet, units=args.units,
-                     scale=args.scale)
+    loading = preload() if args.method == "fast" else None           # the engine, while the data load
+    try:
+        # validate everything first; a session file is recognised as one object, one pose
+        inputs = [load_session(path) if is_session_file(path) else load_touch(path) for path in args.data]
+        db = open_models(db=args.db, models=args.models, warn=_warn, quiet=args.quiet, units=args.units,
+                         scale=args.scale)
+    finally:
+        if loading is not None:
+            loading.join()
     workers = default_workers() if len(db) > 4 else 1
     with Recognizer(db, method=args.method, workers=workers, **_recognition_options(args)) as recognizer:
         results = [recognize_session(recognizer, x).result if isinstance(x, list) else recognizer.recognize(x)

@@ -23,7 +23,7 @@ if config.THREADING_LAYER == "default":
     # Recognizer's workers); GNU OpenMP, numba's other default, ends such a process
     config.THREADING_LAYER = "workqueue"
 
-__all__ = ["field_lookup", "field_gradient", "screen_rotations", "field_scores", "field_refine"]
+__all__ = ["field_lookup", "field_gradient", "screen_rotations", "field_scores", "field_refine", "warm"]
 
 
 
@@ -294,3 +294,16 @@ def field_refine(index, bricks, origin, inv_h, quantum, truncation, R, t, x, ite
             total += abs(_sample(index, bricks, origin, inv_h, quantum, truncation, y0, y1, y2))
         score[i] = total / m
     return Ro, to, score
+
+
+def warm() -> None:
+    """Load every kernel's compiled code (from numba's cache, or compiling it) by calling each once on
+    a tiny empty field, with the argument types and layouts a search passes."""
+    field = (np.full((1, 1, 1), -1, dtype=np.int32), np.zeros((1, BRICK + 1, BRICK + 1, BRICK + 1), dtype=np.int16),
+             np.zeros(3), 1.0, 1.0, 1.0)
+    points = np.zeros((2, 3))
+    field_lookup(*field, points)
+    field_gradient(*field, points)
+    turned = screen_rotations(points, 2)
+    field_scores(*field, np.ascontiguousarray(np.broadcast_to(np.eye(3), (2, 3, 3))), points, turned)
+    field_refine(*field, np.ascontiguousarray(np.broadcast_to(np.eye(3), (2, 3, 3))), points, points, 1)
