@@ -596,3 +596,29 @@ def test_every_model_contends_while_the_best_is_not_a_fit_within_the_noise():
         assert state.clear() is clear
         assert state.contending() == ([0] if clear else [0, 1, 2])
         assert state.settled() == bool(error <= limit)          # the leader has tiers left: only a fit settles
+
+
+def test_a_field_tiers_cost_counts_at_least_the_places_it_screens(scans, small):
+    """The budget stops a search before a tier whose estimated cost would overrun it, so a field
+    tier's estimate of its places (one a grid cell, ``1.5 A / cell^2``: ``fast._State.places``)
+    must not undercount the places the screen takes, on the scans and on the small meshes, for
+    touches of 6 and 12 mm radius (the protocols' curves)."""
+    from types import SimpleNamespace
+
+    from tactrec.engine.screen import screen_places
+    from tactrec.methods import get_method
+    from tactrec.methods.fast import _State
+
+    config = get_method("fast").configure()
+    entries = list(scans.entries) + list(small)
+    field_tier = next(k for k, tier in enumerate(config.tiers) if tier.rotations == "field")
+    for radius in (6.0, 12.0):
+        touch = SimpleNamespace(noise=0.0, radius=radius, fit=0.0, joint_points=np.zeros((90, 3)),
+                                in_units=lambda scale, r=radius: SimpleNamespace(radius=r * scale))
+        touch.data = SimpleNamespace(units="mm")
+        state = _State(touch, entries, list(range(len(entries))), config)
+        for i, entry in enumerate(entries):
+            order = np.arange(len(entry.model.vertices))
+            screened = len(screen_places(entry.model, order, radius, step=config.screen_step))
+            assert screened <= state.places(i, field_tier), (entry.name, radius)
+            assert state.places(i, field_tier) <= len(entry.model.vertices)
