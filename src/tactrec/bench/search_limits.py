@@ -34,7 +34,7 @@ from scipy.spatial.transform import Rotation
 from ..features import Touch
 from ..io.atomic import write_text_atomic
 from ..methods import get_method
-from ..methods.fast import TIERS, tier_cost, fit_limit
+from ..methods.fast import TIERS, fit_limit, tier_cost, tier_places
 from ..methods.fast_stages import tier_span
 from ..registration import mesh_fast
 from ..registration.solver import Criteria, solve
@@ -100,7 +100,9 @@ def run(*, out, instances: int = 10, seed: int = 0, jobs: int | None = None, qui
     records = run_parallel(_touch, tasks, jobs=jobs or 1, quiet=quiet, desc="search-limits")
     config = get_method("fast").configure()
     db = _database(models)
-    cost = {e.name: [tier_cost(config, k, 1, len(e.model.vertices)) for k in range(len(TIERS))] for e in db.entries}
+    radius = PROTOCOLS["p3"]["length"] / 2.0                  # a P3 touch's, in the scans' millimetres
+    cost = {e.name: [tier_cost(config, k, 1, tier_places(config, k, e.model, radius)) for k in range(len(TIERS))]
+            for e in db.entries}
     summary = {}
     for protocol in protocols:
         rows = [r for r in records if r["protocol"] == protocol]

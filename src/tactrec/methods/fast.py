@@ -81,7 +81,7 @@ from .base import NOT_SEARCHED, Config, SearchOutcome
 from .common import in_model_units
 from .fast_stages import _cheap, _closed_form, _polished, _refined, field_stages, tier_span
 
-__all__ = ["FastMethod", "FastConfig", "Tier", "TIERS", "tier_cost"]
+__all__ = ["FastMethod", "FastConfig", "Tier", "TIERS", "tier_cost", "tier_places"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -200,6 +200,19 @@ def tier_cost(config: FastConfig, k: int, signs: int, places: int, curves: int =
     return int(cheap + config.refine * config.iterations * curves * 3 * config.coarse_points)
 
 
+def tier_places(config: FastConfig, k: int, model, radius: float) -> int:
+    """How many places tier ``k`` takes on a mesh ``model`` for a touch of ``radius`` (model units):
+    its vertices, or in a field tier one a grid cell ``screen_step x radius`` across
+    (:func:`tactrec.engine.screen.screen_places`): a surface of area ``A`` meets about ``1.5 A /
+    size^2`` cells (the mean of ``|n_x| + |n_y| + |n_z|`` over directions), and no more cells than
+    it has vertices."""
+    vertices = len(model.vertices)
+    if config.tiers[k].rotations != "field":
+        return vertices
+    size = max(config.screen_step * radius, 1e-12)
+    return min(vertices, int(np.ceil(1.5 * model.area / size ** 2)))
+
+
 class _State:
     """What the search knows: each model's best registration, best cheap score and next tier."""
 
@@ -219,17 +232,11 @@ class _State:
         self.plausible = self.limit + config.within * fit_standard_error(self.limit, len(touch.joint_points))
 
     def places(self, i: int, k: int) -> int:
-        """How many places tier ``k`` takes on model ``i``: its vertices, or in a field tier one a grid
-        cell (:func:`tactrec.engine.screen.screen_places`): a surface of area ``A`` meets about
-        ``1.5 A / size^2`` cells (the mean of ``|n_x| + |n_y| + |n_z|`` over directions), and no more
-        cells than it has vertices."""
-        if self.config.tiers[k].rotations != "field":
-            return self.sizes[i]
-        if i not in self.spots:
+        """How many places tier ``k`` takes on model ``i`` (:func:`tier_places`), for this touch."""
+        if (i, k) not in self.spots:
             model = self.models[i].model
-            size = max(self.config.screen_step * in_model_units(self.touch, model).radius, 1e-12)
-            self.spots[i] = min(self.sizes[i], int(np.ceil(1.5 * model.area / size ** 2)))
-        return self.spots[i]
+            self.spots[i, k] = tier_places(self.config, k, model, in_model_units(self.touch, model).radius)
+        return self.spots[i, k]
 
     def error(self, i: int) -> float:
         return _error(self.best.get(i))
