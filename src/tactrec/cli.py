@@ -129,8 +129,9 @@ def cmd_recognize(args) -> int:
     from .cli_session import format_session, recognize_session
     from .io.session import is_session_file, load_session
 
-    get_method(args.method).configure(**_recognition_options(args))    # a bad option before any work
-    loading = preload() if args.method == "fast" else None           # the engine, while the data load
+    method = get_method(args.method)
+    method.configure(**_recognition_options(args))                    # a bad option before any work
+    loading = preload() if method.uses_engine else None               # the engine, while the data load
     try:
         # validate everything first; a session file is recognised as one object, one pose
         inputs = [load_session(path) if is_session_file(path) else load_touch(path) for path in args.data]

@@ -93,6 +93,9 @@ class Method(Protocol):
     Config: ClassVar[type]
     #: whether :meth:`search` scores its poses on a touch's context (other touches of the object) too
     scores_context: ClassVar[bool]
+    #: whether :meth:`search` runs the compiled kernels of :mod:`tactrec.engine` (loaded ahead by a
+    #: one-off command: :func:`tactrec.engine.preload`)
+    uses_engine: ClassVar[bool]
 
     def configure(self, **options) -> Config: ...
 

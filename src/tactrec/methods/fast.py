@@ -224,8 +224,7 @@ class _State:
         self.deferred = {i: np.inf for i in meshes}
         self.tried = {i: 0 for i in meshes}
         self.next = {i: 0 for i in meshes}
-        self.sizes = {i: len(models[i].model.vertices) for i in meshes}
-        self.models, self.spots = models, {}
+        self.models, self.counts = models, {}
         self.limit = max(fit_limit(touch, config.floor), touch.fit)      # a caller's joint fit, with a context
         # a best error this far above the limit may still be a fit under the noise; beyond it the true
         # pose was missed somewhere, and no model's first tiers rule it out
@@ -233,10 +232,10 @@ class _State:
 
     def places(self, i: int, k: int) -> int:
         """How many places tier ``k`` takes on model ``i`` (:func:`tier_places`), for this touch."""
-        if (i, k) not in self.spots:
+        if (i, k) not in self.counts:
             model = self.models[i].model
-            self.spots[i, k] = tier_places(self.config, k, model, in_model_units(self.touch, model).radius)
-        return self.spots[i, k]
+            self.counts[i, k] = tier_places(self.config, k, model, in_model_units(self.touch, model).radius)
+        return self.counts[i, k]
 
     def error(self, i: int) -> float:
         return _error(self.best.get(i))
@@ -294,6 +293,7 @@ class FastMethod:
 
     name = "fast"
     scores_context = True
+    uses_engine = True
     Config = FastConfig
 
     def configure(self, **options) -> FastConfig:

@@ -97,6 +97,7 @@ class PaperMethod:
 
     name = "paper"
     scores_context = False
+    uses_engine = False
     Config = PaperConfig
 
     def configure(self, **options) -> PaperConfig:

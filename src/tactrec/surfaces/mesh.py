@@ -227,10 +227,15 @@ class MeshModel(SurfaceModel):
         return float(np.linalg.norm(self.bounds[1] - self.bounds[0]))
 
     @cached_property
+    def face_areas(self) -> np.ndarray:
+        """``(F,)`` each face's area (model units squared)."""
+        v = self.vertices[self.faces]
+        return 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
+
+    @cached_property
     def area(self) -> float:
         """The surface's area (model units squared)."""
-        v = self.vertices[self.faces]
-        return float(0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1).sum())
+        return float(self.face_areas.sum())
 
     @cached_property
     def edge_lengths(self) -> np.ndarray:
