@@ -83,7 +83,7 @@ def stable_order(values: np.ndarray, *, quantum: float = QUANTUM) -> np.ndarray:
     with np.errstate(divide="ignore"):
         band = np.floor(np.log(np.maximum(np.where(finite, v, 1.0), 1e-300)) / np.log1p(quantum))
     key = np.where(finite, band, np.inf)
-    return np.lexsort((np.arange(len(v)), key))
+    return np.argsort(key, kind="stable")                # equal bands keep the index order
 
 
 def clearly_less(a: float, b: float, *, quantum: float = QUANTUM) -> bool:
