@@ -102,3 +102,27 @@ def test_jacobian_is_the_derivative_of_the_plane_distances():
 def test_criteria_refuse_bad_values(bad):
     with pytest.raises(ValueError):
         Criteria(**bad)
+
+
+def test_a_step_solves_the_damped_normal_equations_of_the_plane_residuals():
+    """The compiled step against the normal equations written out: ``(J^T J + damping) d = -J^T r``,
+    the turn applied by Rodrigues' formula, the residuals predicted as ``r + J d``."""
+    from tactrec.registration.solver import step
+
+    rng = np.random.default_rng(11)
+    R = rotations_from_vectors(rng.normal(size=(20, 3)))
+    t = rng.normal(size=(20, 3)) * 5.0
+    moved = rng.normal(size=(20, 15, 3)) * 8.0
+    n = rng.normal(size=(20, 15, 3))
+    n /= np.linalg.norm(n, axis=2, keepdims=True)
+    r = rng.normal(size=(20, 15)) * 0.1
+    R2, t2, delta, after = step(R, t, moved, n, r)
+    J = jacobian(moved, n)
+    A = np.einsum("hmi,hmj->hij", J, J)
+    A += 1e-6 * (np.trace(A, axis1=1, axis2=2)[:, None, None] / 6.0 + 1e-12) * np.eye(6)
+    d = np.linalg.solve(A, -np.einsum("hmi,hm->hi", J, r)[..., None])[..., 0]
+    np.testing.assert_allclose(delta, d, rtol=1e-8, atol=1e-12)
+    dR = rotations_from_vectors(d[:, :3])
+    np.testing.assert_allclose(R2, dR @ R, atol=1e-12)
+    np.testing.assert_allclose(t2, np.einsum("hij,hj->hi", dR, t) + d[:, 3:], atol=1e-10)
+    np.testing.assert_allclose(after, r + np.einsum("hmi,hi->hm", J, d), atol=1e-10)

@@ -23,7 +23,7 @@ if config.THREADING_LAYER == "default":
     # Recognizer's workers); GNU OpenMP, numba's other default, ends such a process
     config.THREADING_LAYER = "workqueue"
 
-__all__ = ["field_lookup", "field_gradient", "screen_rotations", "field_scores", "field_refine", "warm"]
+__all__ = ["field_lookup", "field_gradient", "screen_rotations", "field_scores", "field_refine", "plane_step", "warm"]
 
 
 
@@ -296,6 +296,69 @@ def field_refine(index, bricks, origin, inv_h, quantum, truncation, R, t, x, ite
     return Ro, to, score
 
 
+@njit(cache=True, parallel=True)
+def plane_step(R, t, moved, normals, residuals):
+    """One damped point-to-plane Gauss-Newton step on each pose ``R (h, 3, 3), t (h, 3)``, given the
+    moved data ``moved (h, m, 3)``, their planes' unit normals ``normals (h, m, 3)`` and signed
+    distances ``residuals (h, m)`` (:func:`tactrec.registration.solver.step`).  Returns the new
+    poses, the steps ``(h, 6)`` (turn, shift) and the residuals the linearisation predicts ``(h, m)``."""
+    h = R.shape[0]
+    m = moved.shape[1]
+    Ro = np.empty_like(R)
+    to = np.empty_like(t)
+    delta = np.zeros((h, 6))
+    after = np.empty((h, m))
+    for i in prange(h):
+        A = np.zeros((6, 6))
+        b = np.zeros(6)
+        J = np.empty(6)
+        dR = np.empty((3, 3))
+        step = np.zeros(6)
+        for k in range(m):
+            y0 = moved[i, k, 0]
+            y1 = moved[i, k, 1]
+            y2 = moved[i, k, 2]
+            n0 = normals[i, k, 0]
+            n1 = normals[i, k, 1]
+            n2 = normals[i, k, 2]
+            J[0] = y1 * n2 - y2 * n1
+            J[1] = y2 * n0 - y0 * n2
+            J[2] = y0 * n1 - y1 * n0
+            J[3] = n0
+            J[4] = n1
+            J[5] = n2
+            for p in range(6):
+                b[p] -= J[p] * residuals[i, k]
+                for q in range(p, 6):
+                    A[p, q] += J[p] * J[q]
+        trace = 0.0
+        for p in range(6):
+            trace += A[p, p]
+            for q in range(p):
+                A[p, q] = A[q, p]
+        damp = 1e-6 * (trace / 6.0 + 1e-12)
+        for p in range(6):
+            A[p, p] += damp
+        _solve6(A, b, step)
+        for p in range(6):
+            delta[i, p] = step[p]
+        _rodrigues(step[:3], dR)
+        for r in range(3):
+            for c in range(3):
+                Ro[i, r, c] = dR[r, 0] * R[i, 0, c] + dR[r, 1] * R[i, 1, c] + dR[r, 2] * R[i, 2, c]
+            to[i, r] = dR[r, 0] * t[i, 0] + dR[r, 1] * t[i, 1] + dR[r, 2] * t[i, 2] + step[3 + r]
+        for k in range(m):
+            y0 = moved[i, k, 0]
+            y1 = moved[i, k, 1]
+            y2 = moved[i, k, 2]
+            n0 = normals[i, k, 0]
+            n1 = normals[i, k, 1]
+            n2 = normals[i, k, 2]
+            after[i, k] = (residuals[i, k] + (y1 * n2 - y2 * n1) * step[0] + (y2 * n0 - y0 * n2) * step[1]
+                           + (y0 * n1 - y1 * n0) * step[2] + n0 * step[3] + n1 * step[4] + n2 * step[5])
+    return Ro, to, delta, after
+
+
 def warm() -> None:
     """Load every kernel's compiled code (from numba's cache, or compiling it) by calling each once on
     a tiny empty field, with the argument types and layouts a search passes."""
@@ -307,3 +370,5 @@ def warm() -> None:
     turned = screen_rotations(points, 2)
     field_scores(*field, np.ascontiguousarray(np.broadcast_to(np.eye(3), (2, 3, 3))), points, turned)
     field_refine(*field, np.ascontiguousarray(np.broadcast_to(np.eye(3), (2, 3, 3))), points, points, 1)
+    plane_step(np.ascontiguousarray(np.broadcast_to(np.eye(3), (2, 3, 3))), points, np.zeros((2, 2, 3)),
+               np.zeros((2, 2, 3)), np.zeros((2, 2)))

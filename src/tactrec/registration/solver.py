@@ -9,9 +9,11 @@ closed-form surface's first-order distances ``f / |grad f|``, eq. 11).  A
 small turn ``w`` about the origin and a shift ``v`` of the model frame move
 each residual by ``(y x n) . w + n . v`` (:func:`jacobian`).
 
-The arithmetic is element-wise (:mod:`tactrec.linalg`): the same bits on
-every CPU.  The paper's own registrations (:mod:`.closedform_paper`,
-:mod:`.mesh_paper`) keep the paper's steps.
+The arithmetic is element-wise (:mod:`tactrec.linalg`) or a compiled
+kernel's fixed-order loops (:func:`tactrec.engine.kernels.plane_step`, no
+fused or reordered operations): the same bits on every CPU.  The paper's own
+registrations (:mod:`.closedform_paper`, :mod:`.mesh_paper`) keep the
+paper's steps.
 """
 
 from __future__ import annotations
@@ -20,8 +22,8 @@ import dataclasses
 
 import numpy as np
 
-from ..linalg import compose, gram, rotate, solve_spd, transform
-from .result import cross, rotations_from_vectors
+from ..linalg import transform
+from .result import cross
 
 __all__ = ["Criteria", "Fit", "jacobian", "step", "solve", "mean_distance"]
 
@@ -76,13 +78,11 @@ def step(R: np.ndarray, t: np.ndarray, moved: np.ndarray, normals: np.ndarray, r
     directions that a flat or cylindrical patch leaves unconstrained from running away.  Returns
     the new poses, the steps ``(h, 6)`` and the residuals the linearisation predicts after them
     ``(h, m)``."""
-    J = jacobian(moved, normals)                                                       # (h, m, 6)
-    JtJ, Jtr = gram(J, residuals)
-    damp = 1e-6 * (np.trace(JtJ, axis1=1, axis2=2)[:, None, None] / 6.0 + 1e-12)
-    delta = solve_spd(JtJ + damp * np.eye(6), -Jtr)
-    dR = rotations_from_vectors(delta[:, :3])
-    R, t = compose(dR, R), rotate(dR, t) + delta[:, 3:]
-    return R, t, delta, residuals + np.sum(J * delta[:, None, :], axis=2)
+    from ..engine.kernels import plane_step         # compiled: the steps of every pose at once
+
+    c = np.ascontiguousarray
+    return plane_step(c(R, dtype=np.float64), c(t, dtype=np.float64), c(moved, dtype=np.float64),
+                      c(normals, dtype=np.float64), c(residuals, dtype=np.float64))
 
 
 def mean_distance(model, R: np.ndarray, t: np.ndarray, x: np.ndarray) -> np.ndarray:
