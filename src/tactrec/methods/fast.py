@@ -2,12 +2,13 @@
 
 The hypotheses are (model, place, rotation about the normal, tilt of the
 normal, sign of the normal).  The search takes them in *tiers*
-(:data:`TIERS`), each a step coarse to fine: the few places whose curvature
-best matches the data's, posed by their principal frames; then every place
-at every rotation, screened on the model's distance field
-(:mod:`tactrec.engine.screen`), the best 500 places by curvature first and
-then the rest: the curvature index orders the places, it does not filter
-them; last, every place again with the data's normal tilted every
+(:data:`TIERS`), each a step coarse to fine: the best 500 places by
+curvature at every rotation, screened on the model's distance field
+(:mod:`tactrec.engine.screen`); the few places whose curvature best matches
+the data's, posed by their principal frames (exact vertices and frames,
+which the screen's grid of places and turns can fall between); every other
+place at every rotation on the field: the curvature index orders the
+places, it does not filter them; last, every place again with the data's normal tilted every
 ``tilt_step`` degrees out to 60, for a contact on a sharp or thin feature,
 where no fit of the curves gives the surface's normal (each of its best
 seeds then set on a dense local grid of turns and shifts, which bridges the
@@ -107,7 +108,7 @@ class Tier:
 
 
 #: the default schedule, coarse to fine
-TIERS = (Tier(24), Tier(500, "field"), Tier(None, "field"), Tier(None, "field", 60.0))
+TIERS = (Tier(500, "field"), Tier(24), Tier(None, "field"), Tier(None, "field", 60.0))
 #: the exhaustive reference: every vertex, every 30 degrees
 EXHAUSTIVE = (Tier(None, "all"),)
 
