@@ -24,7 +24,8 @@ from ..registration.result import local_frame, rotations_from_vectors
 from ..surfaces.mesh_curvature import tangents
 from .kernels import field_scores, screen_rotations
 
-__all__ = ["Screen", "screen", "screen_places", "data_normals", "tilted_normals", "local_screen", "DISTINCT", "LOCAL_STEPS"]
+__all__ = ["Screen", "screen", "screen_places", "data_normals", "tilt_rings", "tilted_normals", "local_screen",
+           "DISTINCT", "LOCAL_STEPS"]
 
 #: values of each turn and shift of :func:`local_screen`'s grid about a pose (``LOCAL_STEPS**6`` poses)
 LOCAL_STEPS = 5
@@ -90,6 +91,12 @@ def data_normals(geometry, fitted: np.ndarray, *, distinct: float) -> list[np.nd
     return out
 
 
+def tilt_rings(*, cone: float, step: float) -> list[tuple[float, int]]:
+    """The rings of :func:`tilted_normals`: each ring's tilt (radians) and how many normals it holds."""
+    rings = np.arange(1, int(np.floor(cone / step + 1e-9)) + 1) * np.deg2rad(step)
+    return [(float(a), max(6, int(round(2.0 * np.pi * np.sin(a) / np.deg2rad(step))))) for a in rings]
+
+
 def tilted_normals(normal: np.ndarray, reference: np.ndarray, *, cone: float, step: float) -> list[np.ndarray]:
     """Data normals tilted off ``normal (3,)`` on rings ``step, 2 step, ...`` degrees out to ``cone``,
     each ring at about ``step`` apart (at least six), azimuth 0 towards ``reference (3,)``: the
@@ -98,8 +105,7 @@ def tilted_normals(normal: np.ndarray, reference: np.ndarray, *, cone: float, st
     among them."""
     L = local_frame(np.asarray(normal, dtype=np.float64), np.asarray(reference, dtype=np.float64))   # rows t1 t2 N
     out = []
-    for ring in np.arange(1, int(np.floor(cone / step + 1e-9)) + 1) * np.deg2rad(step):
-        count = max(6, int(round(2.0 * np.pi * np.sin(ring) / np.deg2rad(step))))
+    for ring, count in tilt_rings(cone=cone, step=step):
         for a in 2.0 * np.pi * np.arange(count) / count:
             v = np.array([np.sin(ring) * np.cos(a), np.sin(ring) * np.sin(a), np.cos(ring)])
             out.append(v[0] * L[0] + v[1] * L[1] + v[2] * L[2])                         # element-wise: no BLAS

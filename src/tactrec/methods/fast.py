@@ -179,10 +179,9 @@ def tier_cost(config: FastConfig, k: int, signs: int, places: int, curves: int =
         # tilted tier screens all its tilted normals at once and sets its best seeds on a local grid
         normals, screens, local = 1, 2, 0
         if tier.tilt > 0:
-            from ..engine.screen import LOCAL_STEPS, tilted_normals
+            from ..engine.screen import LOCAL_STEPS, tilt_rings
 
-            normals = len(tilted_normals(np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0]), cone=tier.tilt,
-                                         step=config.tilt_step))
+            normals = sum(count for _, count in tilt_rings(cone=tier.tilt, step=config.tilt_step))
             screens = 1
             local = config.refine * LOCAL_STEPS ** 6 * config.coarse_points * curves * LOOKUP_COST
         lookups, alive = 0, max(0, min(places, stop if stop is not None else places) - start)
