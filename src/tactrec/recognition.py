@@ -256,6 +256,10 @@ class Recognizer:
         self.estimation = dict(window=window, degree=degree, curvature_method=curvature_method)
         for entry in self.models:
             self.method.prepare(entry.model)
+        if self.method.uses_engine:
+            from .engine.kernels import warm
+
+            warm()         # compiled or loaded now, not in a recognition's seconds; forked workers inherit it
         held = _Held(self.models)
         # not from inside another process's worker (a benchmark running touches in parallel):
         # forking there can deadlock, and that pool already uses the cores
