@@ -8,11 +8,12 @@ curvature at every rotation, screened on the model's distance field
 the data's, posed by their principal frames (exact vertices and frames,
 which the screen's grid of places and turns can fall between); every other
 place at every rotation on the field: the curvature index orders the
-places, it does not filter them; last, every place again with the data's normal tilted every
-``tilt_step`` degrees out to 60, for a contact on a sharp or thin feature,
-where no fit of the curves gives the surface's normal (each of its best
-seeds then set on a dense local grid of turns and shifts, which bridges the
-tilts' grid and the basin of the exact steps).  A tier on a set of models is
+places, it does not filter them; last, every place again with the data's
+normal tilted every ``tilt_step`` degrees out to 60, for a contact on a
+sharp or thin feature, where no fit of the curves gives the surface's
+normal (each of its best seeds then set on a dense local grid of turns and
+shifts, which bridges the tilts' grid and the basin of the exact steps).
+A tier on a set of models is
 
 1. *cheap stage* (per model, :func:`_cheap`): the tier's new hypotheses are
    posed from frames (:func:`tactrec.registration.mesh_fast.frame_poses`) and
