@@ -218,6 +218,62 @@ def _rodrigues(w, out):
     out[2, 2] = 1.0 - c * (kx * kx + ky * ky)
 
 
+@njit(cache=True, nogil=True)
+def _add_plane(y0, y1, y2, n0, n1, n2, r, J, A, b):
+    """One residual ``r`` at a moved point ``y`` on a plane of unit normal ``n`` into the normal
+    equations: its row ``J (6,) = (y x n, n)`` (turn, shift), the upper triangle of ``A (6, 6)``
+    and ``b (6,)`` (``-J^T r``)."""
+    J[0] = y1 * n2 - y2 * n1
+    J[1] = y2 * n0 - y0 * n2
+    J[2] = y0 * n1 - y1 * n0
+    J[3] = n0
+    J[4] = n1
+    J[5] = n2
+    for p in range(6):
+        b[p] -= J[p] * r
+        for q in range(p, 6):
+            A[p, q] += J[p] * J[q]
+
+
+@njit(cache=True, nogil=True)
+def _damped_solve(A, b, out):
+    """The damped step ``out (6,)`` of the normal equations ``A`` (upper triangle filled) and ``b``:
+    ``A`` made symmetric, ``1e-6 (trace / 6 + 1e-12)`` added to its diagonal.  False (``out``
+    zero) when ``A`` has no trace (no residual constrains the pose) or is not positive definite."""
+    trace = 0.0
+    for p in range(6):
+        trace += A[p, p]
+        for q in range(p):
+            A[p, q] = A[q, p]
+    if trace <= 0.0:
+        for p in range(6):
+            out[p] = 0.0
+        return False
+    damp = 1e-6 * (trace / 6.0 + 1e-12)
+    for p in range(6):
+        A[p, p] += damp
+    return _solve6(A, b, out)
+
+
+@njit(cache=True, nogil=True)
+def _turn(step, dR, tmp, R, t, Ro, to):
+    """The pose ``R (3, 3), t (3,)`` after ``step (6,)`` (turn, shift) into ``Ro, to`` (which may be
+    ``R, t``): ``dR R``, ``dR t + shift``, ``dR (3, 3)`` the turn's rotation; ``tmp (3, 3)`` scratch."""
+    _rodrigues(step[:3], dR)
+    for r in range(3):
+        for c in range(3):
+            tmp[r, c] = dR[r, 0] * R[0, c] + dR[r, 1] * R[1, c] + dR[r, 2] * R[2, c]
+    t0 = dR[0, 0] * t[0] + dR[0, 1] * t[1] + dR[0, 2] * t[2] + step[3]
+    t1 = dR[1, 0] * t[0] + dR[1, 1] * t[1] + dR[1, 2] * t[2] + step[4]
+    t2 = dR[2, 0] * t[0] + dR[2, 1] * t[1] + dR[2, 2] * t[2] + step[5]
+    for r in range(3):
+        for c in range(3):
+            Ro[r, c] = tmp[r, c]
+    to[0] = t0
+    to[1] = t1
+    to[2] = t2
+
+
 @njit(cache=True, parallel=True)
 def field_refine(index, bricks, origin, inv_h, quantum, truncation, R, t, x, iterations):
     """Point-to-plane Gauss-Newton (damped) on the field: poses ``R (h, 3, 3), t (h, 3)`` of data
@@ -249,43 +305,11 @@ def field_refine(index, bricks, origin, inv_h, quantum, truncation, R, t, x, ite
                 y1 = Ri[1, 0] * x[k, 0] + Ri[1, 1] * x[k, 1] + Ri[1, 2] * x[k, 2] + ti[1]
                 y2 = Ri[2, 0] * x[k, 0] + Ri[2, 1] * x[k, 1] + Ri[2, 2] * x[k, 2] + ti[2]
                 d = _sample_gradient(index, bricks, origin, inv_h, quantum, truncation, y0, y1, y2, g)
-                if abs(d) >= truncation:
-                    continue
-                J[0] = y1 * g[2] - y2 * g[1]
-                J[1] = y2 * g[0] - y0 * g[2]
-                J[2] = y0 * g[1] - y1 * g[0]
-                J[3] = g[0]
-                J[4] = g[1]
-                J[5] = g[2]
-                for p in range(6):
-                    b[p] -= J[p] * d
-                    for q in range(p, 6):
-                        A[p, q] += J[p] * J[q]
-            trace = 0.0
-            for p in range(6):
-                trace += A[p, p]
-                for q in range(p):
-                    A[p, q] = A[q, p]
-            if trace <= 0.0:
+                if abs(d) < truncation:
+                    _add_plane(y0, y1, y2, g[0], g[1], g[2], d, J, A, b)
+            if not _damped_solve(A, b, step):
                 break
-            damp = 1e-6 * (trace / 6.0 + 1e-12)
-            for p in range(6):
-                A[p, p] += damp
-            if not _solve6(A, b, step):
-                break
-            _rodrigues(step[:3], dR)
-            for r in range(3):
-                for c in range(3):
-                    tmp[r, c] = dR[r, 0] * Ri[0, c] + dR[r, 1] * Ri[1, c] + dR[r, 2] * Ri[2, c]
-            t0 = dR[0, 0] * ti[0] + dR[0, 1] * ti[1] + dR[0, 2] * ti[2] + step[3]
-            t1 = dR[1, 0] * ti[0] + dR[1, 1] * ti[1] + dR[1, 2] * ti[2] + step[4]
-            t2 = dR[2, 0] * ti[0] + dR[2, 1] * ti[1] + dR[2, 2] * ti[2] + step[5]
-            for r in range(3):
-                for c in range(3):
-                    Ri[r, c] = tmp[r, c]
-            ti[0] = t0
-            ti[1] = t1
-            ti[2] = t2
+            _turn(step, dR, tmp, Ri, ti, Ri, ti)
         total = 0.0
         for k in range(m):
             y0 = Ri[0, 0] * x[k, 0] + Ri[0, 1] * x[k, 1] + Ri[0, 2] * x[k, 2] + ti[0]
@@ -311,51 +335,22 @@ def plane_step(R, t, moved, normals, residuals):
     for i in prange(h):
         A = np.zeros((6, 6))
         b = np.zeros(6)
-        J = np.empty(6)
+        J = np.empty((m, 6))
         dR = np.empty((3, 3))
+        tmp = np.empty((3, 3))
         step = np.zeros(6)
         for k in range(m):
-            y0 = moved[i, k, 0]
-            y1 = moved[i, k, 1]
-            y2 = moved[i, k, 2]
-            n0 = normals[i, k, 0]
-            n1 = normals[i, k, 1]
-            n2 = normals[i, k, 2]
-            J[0] = y1 * n2 - y2 * n1
-            J[1] = y2 * n0 - y0 * n2
-            J[2] = y0 * n1 - y1 * n0
-            J[3] = n0
-            J[4] = n1
-            J[5] = n2
-            for p in range(6):
-                b[p] -= J[p] * residuals[i, k]
-                for q in range(p, 6):
-                    A[p, q] += J[p] * J[q]
-        trace = 0.0
-        for p in range(6):
-            trace += A[p, p]
-            for q in range(p):
-                A[p, q] = A[q, p]
-        damp = 1e-6 * (trace / 6.0 + 1e-12)
-        for p in range(6):
-            A[p, p] += damp
-        _solve6(A, b, step)
+            _add_plane(moved[i, k, 0], moved[i, k, 1], moved[i, k, 2], normals[i, k, 0], normals[i, k, 1],
+                       normals[i, k, 2], residuals[i, k], J[k], A, b)
+        _damped_solve(A, b, step)                 # no constraint: a zero step, the pose unchanged
         for p in range(6):
             delta[i, p] = step[p]
-        _rodrigues(step[:3], dR)
-        for r in range(3):
-            for c in range(3):
-                Ro[i, r, c] = dR[r, 0] * R[i, 0, c] + dR[r, 1] * R[i, 1, c] + dR[r, 2] * R[i, 2, c]
-            to[i, r] = dR[r, 0] * t[i, 0] + dR[r, 1] * t[i, 1] + dR[r, 2] * t[i, 2] + step[3 + r]
+        _turn(step, dR, tmp, R[i], t[i], Ro[i], to[i])
         for k in range(m):
-            y0 = moved[i, k, 0]
-            y1 = moved[i, k, 1]
-            y2 = moved[i, k, 2]
-            n0 = normals[i, k, 0]
-            n1 = normals[i, k, 1]
-            n2 = normals[i, k, 2]
-            after[i, k] = (residuals[i, k] + (y1 * n2 - y2 * n1) * step[0] + (y2 * n0 - y0 * n2) * step[1]
-                           + (y0 * n1 - y1 * n0) * step[2] + n0 * step[3] + n1 * step[4] + n2 * step[5])
+            predicted = residuals[i, k]
+            for p in range(6):
+                predicted += J[k, p] * step[p]
+            after[i, k] = predicted
     return Ro, to, delta, after
 
 
