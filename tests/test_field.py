@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from tactrec.engine.kernels import field_gradient, field_refine, field_scores, screen_rotations
+from tactrec.engine.kernels import field_best, field_gradient, field_refine, screen_rotations
 from tactrec.registration.result import rotations_from_vectors
 from tactrec.registration.solver import mean_distance
 from tactrec.surfaces.mesh import MeshModel
@@ -93,7 +93,7 @@ def test_the_field_survives_storage_and_a_malformed_one_is_refused(sphere):
             DistanceField.from_store(dict(field.to_store(), **{key: bad}))
 
 
-def test_the_screen_scores_a_pose_by_its_mean_truncated_distance(sphere):
+def test_the_screen_keeps_each_places_least_mean_truncated_distance(sphere):
     field = sphere.distance_field
     rng = np.random.default_rng(4)
     local = rng.normal(size=(7, 3)) * [5.0, 5.0, 0.3]
@@ -104,9 +104,12 @@ def test_the_screen_scores_a_pose_by_its_mean_truncated_distance(sphere):
     d1 /= np.linalg.norm(d1, axis=1, keepdims=True)
     frames = np.stack([d1, np.cross(normals, d1), normals], axis=2)
     turned = screen_rotations(local, 12)
-    scores = field_scores(*field.args(), np.ascontiguousarray(frames), np.ascontiguousarray(places), turned)
+    best, which = field_best(*field.args(), np.ascontiguousarray(frames), np.ascontiguousarray(places), turned)
     moved = np.einsum("nij,rmj->nrmi", frames, turned) + places[:, None, None]
-    np.testing.assert_allclose(scores, np.abs(field.signed(moved)).mean(axis=-1), rtol=1e-6)
+    every = np.abs(field.signed(moved)).mean(axis=-1)                  # (n, r): every point of every turn
+    np.testing.assert_allclose(best, every.min(axis=1), rtol=1e-6)
+    np.testing.assert_allclose(every[np.arange(len(best)), which], every.min(axis=1), rtol=1e-6)
+    assert len(np.unique(which)) > 3                                   # the places' best turns differ
 
 
 def test_gauss_newton_on_the_field_recovers_a_perturbed_pose_on_a_scan(scans):
@@ -185,7 +188,7 @@ def test_the_preload_loads_every_kernel_a_search_calls(scans):
     from tactrec.simulation import simulate_random_touch
 
     preload().join()
-    names = ("field_lookup", "field_gradient", "screen_rotations", "field_scores", "field_refine")
+    names = ("field_lookup", "field_gradient", "screen_rotations", "field_best", "field_refine")
     loaded = {name: list(getattr(kernels, name).signatures) for name in names}
     assert all(len(s) == 1 for s in loaded.values())
     depth = 0

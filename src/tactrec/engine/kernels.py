@@ -23,7 +23,7 @@ if config.THREADING_LAYER == "default":
     # Recognizer's workers); GNU OpenMP, numba's other default, ends such a process
     config.THREADING_LAYER = "workqueue"
 
-__all__ = ["field_lookup", "field_gradient", "screen_rotations", "field_scores", "field_refine", "plane_step", "warm"]
+__all__ = ["field_lookup", "field_gradient", "screen_rotations", "field_best", "field_refine", "plane_step", "warm"]
 
 
 
@@ -132,21 +132,26 @@ def screen_rotations(local, count):
 
 
 @njit(cache=True, parallel=True)
-def field_scores(index, bricks, origin, inv_h, quantum, truncation, frames, places, turned):
-    """The screen: the mean truncated distance ``(n, r)`` of the data at each place and rotation.
+def field_best(index, bricks, origin, inv_h, quantum, truncation, frames, places, turned):
+    """The screen: at each place, the rotation whose data lie nearest the surface.
 
     ``frames (n, 3, 3)`` (columns: two tangents and the outward normal of each place),
     ``places (n, 3)``, ``turned (r, m, 3)`` (:func:`screen_rotations`): hypothesis ``(i, j)``
-    moves a data point ``x`` to ``frames[i] @ turned[j] + places[i]``."""
+    moves a data point ``x`` to ``frames[i] @ turned[j] + places[i]``.  Returns each place's
+    least mean truncated distance ``(n,) float32`` and its rotation ``(n,) int64`` (the first of
+    equal sums)."""
     n = frames.shape[0]
     r = turned.shape[0]
     m = turned.shape[1]
-    out = np.empty((n, r), dtype=np.float32)
+    out = np.empty(n, dtype=np.float32)
+    which = np.zeros(n, dtype=np.int64)
     for i in prange(n):
         F = frames[i]
         px = places[i, 0]
         py = places[i, 1]
         pz = places[i, 2]
+        best = np.inf
+        arg = 0
         for j in range(r):
             total = 0.0
             for k in range(m):
@@ -157,8 +162,12 @@ def field_scores(index, bricks, origin, inv_h, quantum, truncation, frames, plac
                 y = F[1, 0] * a + F[1, 1] * b + F[1, 2] * c + py
                 z = F[2, 0] * a + F[2, 1] * b + F[2, 2] * c + pz
                 total += abs(_sample(index, bricks, origin, inv_h, quantum, truncation, x, y, z))
-            out[i, j] = total / m
-    return out
+            if total < best:
+                best = total
+                arg = j
+        out[i] = best / m
+        which[i] = arg
+    return out, which
 
 
 @njit(cache=True, nogil=True)
@@ -363,7 +372,7 @@ def warm() -> None:
     field_lookup(*field, points)
     field_gradient(*field, points)
     turned = screen_rotations(points, 2)
-    field_scores(*field, np.ascontiguousarray(np.broadcast_to(np.eye(3), (2, 3, 3))), points, turned)
+    field_best(*field, np.ascontiguousarray(np.broadcast_to(np.eye(3), (2, 3, 3))), points, turned)
     field_refine(*field, np.ascontiguousarray(np.broadcast_to(np.eye(3), (2, 3, 3))), points, points, 1)
     plane_step(np.ascontiguousarray(np.broadcast_to(np.eye(3), (2, 3, 3))), points, np.zeros((2, 2, 3)),
                np.zeros((2, 2, 3)), np.zeros((2, 2)))

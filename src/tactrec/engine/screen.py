@@ -7,7 +7,7 @@ fitted normal onto the place's fitted normal (both paraboloid fits at one
 scale, :func:`tactrec.registration.mesh_fast.data_curvatures`), and turns the
 data about it in ``rotations`` equal steps.  Each hypothesis is scored by
 the mean truncated distance of a few points of each curve
-(:func:`tactrec.engine.kernels.field_scores`, about fifty times cheaper than
+(:func:`tactrec.engine.kernels.field_best`, about fifty times cheaper than
 an exact query); the best ``keep`` go on to exact steps.  Places come in
 the order of their curvature gap to the data, so a caller may screen them a
 part at a time, most likely first.
@@ -22,7 +22,7 @@ import numpy as np
 from ..linalg import compose, rotate, stable_order, transform
 from ..registration.result import local_frame, rotations_from_vectors
 from ..surfaces.mesh_curvature import tangents
-from .kernels import field_scores, screen_rotations
+from .kernels import field_best, screen_rotations
 
 __all__ = ["Screen", "screen", "screen_places", "data_normals", "tilt_rings", "tilted_normals", "local_screen",
            "DISTINCT", "LOCAL_STEPS"]
@@ -56,10 +56,10 @@ def screen_places(model, gap_order: np.ndarray, radius: float, *, step: float) -
     return first_per_cell(model, gap_order, max(step * radius, 1e-12))
 
 
-def _best_places(scores: np.ndarray, keep: int) -> np.ndarray:
-    """Indices of the ``keep`` places (rows) whose best rotation scores least, best first (ties at
-    the cut kept and ordered by index: :func:`tactrec.linalg.stable_order`)."""
-    best = scores.min(axis=1).astype(np.float64)
+def _best_places(best: np.ndarray, keep: int) -> np.ndarray:
+    """Indices of the ``keep`` places whose best rotation scores ``best (n,)`` least, best first (ties
+    at the cut kept and ordered by index: :func:`tactrec.linalg.stable_order`)."""
+    best = best.astype(np.float64)
     k = min(keep, len(best))
     part = np.arange(len(best))
     if k < len(best):
@@ -131,12 +131,11 @@ def local_screen(model, R: np.ndarray, t: np.ndarray, x: np.ndarray, contact: np
         pivot = rotate(R[s], contact) + t[s]
         turned_R = compose(turns, R[s][None])
         turned = np.ascontiguousarray(transform(turned_R, np.zeros((len(turns), 3)), x - contact))  # (r, m, 3)
-        scores = field_scores(*field.args(), eye, np.ascontiguousarray(pivot + shifts), turned)
-        flat = stable_order(scores.ravel().astype(np.float64))[0]
-        i, j = divmod(int(flat), scores.shape[1])
-        Rb[s] = turned_R[j]
+        best, which = field_best(*field.args(), eye, np.ascontiguousarray(pivot + shifts), turned)
+        i = int(stable_order(best.astype(np.float64))[0])
+        Rb[s] = turned_R[which[i]]
         tb[s] = pivot + shifts[i] - rotate(Rb[s], contact)
-        sb[s] = scores[i, j]
+        sb[s] = best[i]
     return Rb, tb, sb, int(len(R) * len(turns) * len(shifts) * len(x))
 
 
@@ -164,14 +163,14 @@ def screen(model, geometry, vertices: np.ndarray, normals: np.ndarray, curves, n
         points = _ends(curves, per_curve) if extra is None else np.concatenate([_ends(curves, per_curve), extra])
         turned = np.concatenate([screen_rotations(np.ascontiguousarray(rotate(L, points - geometry.contact)),
                                                   rotations) for L in L0])              # element-wise: no BLAS
-        scores = field_scores(*field.args(), frames, np.ascontiguousarray(model.vertices[vertices[alive]]), turned)
-        lookups += scores.size * len(points)
+        best, arg = field_best(*field.args(), frames, np.ascontiguousarray(model.vertices[vertices[alive]]), turned)
+        lookups += best.size * turned.shape[0] * len(points)
         last = k == len(stages) - 1
-        chosen = _best_places(scores, keep if last else max(keep, int(np.ceil(share * len(alive)))))
+        chosen = _best_places(best, keep if last else max(keep, int(np.ceil(share * len(alive)))))
         if not last:
             alive = alive[chosen]
-    which, turn = np.divmod(np.argmin(scores[chosen], axis=1), rotations)
-    score = scores[chosen, which * rotations + turn].astype(np.float64)
+    which, turn = np.divmod(arg[chosen], rotations)
+    score = best[chosen].astype(np.float64)
     angle = 2.0 * np.pi * turn / rotations
     c, s = np.cos(angle), np.sin(angle)
     Rz = np.zeros((len(chosen), 3, 3))
