@@ -299,7 +299,7 @@ def test_a_sessions_fits_are_the_same_in_worker_processes(scans):
     for workers in (1, 2):
         with Recognizer(scans.entries, workers=workers, budget=30_000) as recognizer:
             out = []
-            for k, j in ((1, 1), (2, 1)):
+            for k, j in ((1, 10), (2, 6)):
                 entry = scans.entries[k]
                 session = recognizer.session()
                 pose = random_rigid_motion(instance_rng(30, k, j), extent=300.0)

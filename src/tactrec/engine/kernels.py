@@ -376,3 +376,8 @@ def warm() -> None:
     field_refine(*field, np.ascontiguousarray(np.broadcast_to(np.eye(3), (2, 3, 3))), points, points, 1)
     plane_step(np.ascontiguousarray(np.broadcast_to(np.eye(3), (2, 3, 3))), points, np.zeros((2, 2, 3)),
                np.zeros((2, 2, 3)), np.zeros((2, 2)))
+    from .anderson import anderson
+
+    eye = np.ascontiguousarray(np.broadcast_to(np.eye(3), (2, 3, 3)))
+    anderson(eye, points, eye, points, eye, points, np.zeros((2, 4, 6)), np.zeros((2, 4, 6)), np.zeros(2, dtype=np.int64),
+             1.0)

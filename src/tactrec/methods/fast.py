@@ -31,6 +31,10 @@ A tier on a set of models is
    the others are deferred, not dropped;
 3. *refinement* (per model, :func:`_refined`): ``iterations`` exact steps on
    three times the points, then two on all points for the model's best.
+   Every refinement of more than one step extrapolates its steps from the
+   last ``history`` (Anderson acceleration, :mod:`tactrec.engine.anderson`):
+   on a scan's facets a plain step slides a weakly held pose a few per cent
+   of the way to the fit, for a hundred steps.
 
 The first tier runs on every model.  Each later round runs the next tier of
 the models in contention (:meth:`_State.contending`): those whose best score
@@ -133,6 +137,7 @@ class FastConfig(Config):
     floor: float = 1e-3
     within: float = 3.0
     tolerance: float = 1e-5
+    history: int = 3
     candidates: int = closedform_fast.DEFAULTS["candidates"]
     screen_step: float = 0.17
     screen_stages: tuple = ((36, 2, 0.05), (72, 4, 1.0))
@@ -145,10 +150,10 @@ class FastConfig(Config):
         object.__setattr__(self, "tiers", tiers)
         self._check("tiers", len(tiers) > 0 and all(isinstance(t, Tier) for t in tiers), "a non-empty tuple of Tier")
         for name in ("budget", "coarse_points", "cheap_steps", "screen", "refine", "iterations", "polish",
-                     "polish_iterations", "candidates", "field_steps"):
+                     "polish_iterations", "candidates", "field_steps", "history"):
             value = getattr(self, name)
-            self._check(name, isinstance(value, (int, np.integer)) and value >= (0 if name == "polish" else 1),
-                        "a whole number >= 1")
+            least = 0 if name in ("polish", "history") else 1
+            self._check(name, isinstance(value, (int, np.integer)) and value >= least, f"a whole number >= {least}")
         self._check("coarse_points", self.coarse_points >= 3, "at least 3")
         for name in ("spread", "ratio", "umbilic", "floor", "within", "tolerance"):
             self._check(name, np.isfinite(getattr(self, name)) and getattr(self, name) > 0, "a positive number")

@@ -142,7 +142,8 @@ def _cheap(held, indices, touch, config: FastConfig, k: int) -> list[dict]:
                     R, tr, first, q = solve(model, R, tr, screened, Criteria(1, predict=True))
                     keep = stable_order(first)[:kept]
                     R, tr, owner, steps, queries = R[keep], tr[keep], owner[keep], steps - 1, queries + q
-                R, tr, score, q = solve(model, R, tr, x, Criteria(steps, tolerance=config.tolerance, predict=True))
+                R, tr, score, q = solve(model, R, tr, x, Criteria(steps, tolerance=config.tolerance, predict=True,
+                                                                history=config.history))
                 queries += q
                 order = np.lexsort((stable_order(score).argsort(), owner))          # each place's best rotation
                 best = order[np.r_[True, owner[order][1:] != owner[order][:-1]]]
@@ -173,12 +174,12 @@ def _refined(held, indices, touch, config: FastConfig, chosen: list[dict]) -> li
         model = held.entries[index].model
         t = in_model_units(touch, model)
         R, tr, error, q1 = solve(model, poses["R"], poses["t"], t.joint_subset(3 * config.coarse_points),
-                                 Criteria(config.iterations, tolerance=config.tolerance))
+                                 Criteria(config.iterations, tolerance=config.tolerance, history=config.history))
         order = stable_order(error)
         b = order[0]
         others = np.concatenate([R[order], tr[order][:, :, None]], axis=2)                 # (k, 3, 4), best first
         R, tr, error, q2 = solve(model, R[b:b + 1], tr[b:b + 1], t.joint_points,
-                                 Criteria(2, tolerance=config.tolerance))
+                                 Criteria(2, tolerance=config.tolerance, history=config.history))
         found = _registration(model, t, R[0], tr[0], error[0], int(poses["sign"][b]))
         out.append({"registration": dataclasses.replace(found, alternatives=others), "queries": q1 + q2})
     return out
@@ -192,7 +193,8 @@ def _polished(held, indices, touch, config: FastConfig, registrations: list[Regi
         t = in_model_units(touch, model)
         if model.kind == "mesh":
             R, tr, error, q = solve(model, r.rotation[None], r.translation[None], t.joint_points,
-                                    Criteria(config.polish_iterations, tolerance=config.tolerance))
+                                    Criteria(config.polish_iterations, tolerance=config.tolerance,
+                                             history=config.history))
             better = dataclasses.replace(_registration(model, t, R[0], tr[0], error[0], r.normal_sign),
                                          alternatives=r.alternatives) if error[0] < r.error else r
         else:
