@@ -14,12 +14,15 @@ __all__ = ["refine", "per_touch", "fit_stage", "JOINT_ITERATIONS", "REFINED"]
 
 #: Gauss-Newton steps of a joint refinement, and how many candidate poses per model are refined
 JOINT_ITERATIONS, REFINED = 15, 2
+#: past steps a refinement's step is extrapolated from (Anderson acceleration, as method ``fast``'s)
+HISTORY = 3
 
 
 def refine(model, R: np.ndarray, t: np.ndarray, x: np.ndarray, iterations: int):
     """Poses ``R (h, 3, 3), t (h, 3)`` refined on points ``x (m, 3)`` (model units) by the one
-    point-to-plane solver (:func:`tactrec.registration.solver.solve`): ``R, t, error (h,)``."""
-    fit = solve(model, R, t, x, Criteria(iterations))
+    point-to-plane solver (:func:`tactrec.registration.solver.solve`, accelerated from :data:`HISTORY`
+    steps): ``R, t, error (h,)``."""
+    fit = solve(model, R, t, x, Criteria(iterations, history=HISTORY))
     return fit.R, fit.t, fit.error
 
 
