@@ -25,7 +25,7 @@ from ..surfaces.mesh_curvature import tangents
 from .kernels import field_best, screen_rotations
 
 __all__ = ["Screen", "screen", "screen_places", "data_normals", "tilt_rings", "tilted_normals", "local_screen",
-           "DISTINCT", "LOCAL_STEPS"]
+           "local_lookups", "DISTINCT", "LOCAL_STEPS"]
 
 #: values of each turn and shift of :func:`local_screen`'s grid about a pose (``LOCAL_STEPS**6`` poses)
 LOCAL_STEPS = 5
@@ -112,6 +112,11 @@ def tilted_normals(normal: np.ndarray, reference: np.ndarray, *, cone: float, st
     return out
 
 
+def local_lookups(seeds: int, points: int, *, steps: int = LOCAL_STEPS) -> int:
+    """The field lookups of :func:`local_screen` about ``seeds`` poses scored on ``points`` points."""
+    return int(seeds * steps ** 6 * points)
+
+
 def local_screen(model, R: np.ndarray, t: np.ndarray, x: np.ndarray, contact: np.ndarray, *, angle: float,
                  shift: float, steps: int = LOCAL_STEPS) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     """A dense grid about each pose ``R (s, 3, 3), t (s, 3)``: turns of up to ``angle`` degrees about
@@ -136,7 +141,7 @@ def local_screen(model, R: np.ndarray, t: np.ndarray, x: np.ndarray, contact: np
         Rb[s] = turned_R[which[i]]
         tb[s] = pivot + shifts[i] - rotate(Rb[s], contact)
         sb[s] = best[i]
-    return Rb, tb, sb, int(len(R) * len(turns) * len(shifts) * len(x))
+    return Rb, tb, sb, local_lookups(len(R), len(x), steps=steps)
 
 
 def screen(model, geometry, vertices: np.ndarray, normals: np.ndarray, curves, normal: np.ndarray, *, stages,

@@ -185,11 +185,11 @@ def tier_cost(config: FastConfig, k: int, signs: int, places: int, curves: int =
         # tilted tier screens all its tilted normals at once and sets its best seeds on a local grid
         normals, screens, local = 1, 2, 0
         if tier.tilt > 0:
-            from ..engine.screen import LOCAL_STEPS, tilt_rings
+            from ..engine.screen import local_lookups, tilt_rings
 
             normals = sum(count for _, count in tilt_rings(cone=tier.tilt, step=config.tilt_step))
             screens = 1
-            local = config.refine * LOCAL_STEPS ** 6 * config.coarse_points * curves * LOOKUP_COST
+            local = local_lookups(config.refine, config.coarse_points * curves) * LOOKUP_COST
         lookups, alive = 0, max(0, min(places, stop if stop is not None else places) - start)
         for rotations, per_curve, share in field_stages(config, tier):
             lookups += alive * normals * rotations * (per_curve * curves + context)

@@ -7,8 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..linalg import transform
-from ..registration.solver import Criteria, solve
+from ..registration.solver import Criteria, mean_distance, solve
 
 __all__ = ["refine", "per_touch", "fit_stage", "JOINT_ITERATIONS", "REFINED"]
 
@@ -28,12 +27,8 @@ def refine(model, R: np.ndarray, t: np.ndarray, x: np.ndarray, iterations: int):
 
 def per_touch(model, R: np.ndarray, t: np.ndarray, points: list, scale: float) -> np.ndarray:
     """Mean distance of each touch's points ``points[i] (m_i, 3)`` (data units) under poses
-    ``R (h, 3, 3), t (h, 3)``: ``(h, N)``, data units."""
-    out = []
-    for x in points:
-        d = model.distance(transform(R, t, x * scale)) / scale
-        out.append(np.mean(d, axis=1))
-    return np.stack(out, axis=1)
+    ``R (h, 3, 3), t (h, 3)``: ``(h, N)``, data units (inf where the model gives no distance)."""
+    return np.stack([mean_distance(model, R, t, x * scale) / scale for x in points], axis=1)
 
 
 def fit_stage(held, indices, points: list, weight: np.ndarray, items: list) -> list:
