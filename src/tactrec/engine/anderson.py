@@ -4,12 +4,13 @@ A Gauss-Newton step on a faceted surface sees each data point's plane and
 not how the surface bends away from it: where the data leave a direction
 weakly held (sliding along a gently curved patch), every step moves the
 pose a few per cent of the way and the steps repeat, for a hundred
-iterations.  Anderson acceleration (type II, as in AA-ICP: Pavlov,
-Ovchinnikov, Shabalin and Kornilova, 2018) treats the step as a fixed-point
-map ``g(u)`` of the pose's parameters and extrapolates from the last few:
-it solves ``min |f_k - dF gamma|`` over the differences of the residuals
+iterations.  Anderson acceleration (type II, as in AA-ICP: Pavlov et al.,
+ICRA 2018) treats the step as a fixed-point map ``g(u)`` of the pose's
+parameters and extrapolates from the last few: it solves
+``min |f_k - dF gamma|`` over the differences of the residuals
 ``f = g(u) - u`` and moves to ``g(u_k) - dG gamma``.  The caller keeps the
-extrapolation only while it lowers the error (:func:`tactrec.registration.solver.solve`).
+extrapolation only while it lowers the error
+(:func:`tactrec.registration.solver.solve`).
 
 A pose's parameters are taken relative to where its refinement started:
 ``R = Q R0``, ``t = Q t0 + s`` gives ``u = (reach w, s)`` with ``w`` the
