@@ -9,7 +9,7 @@ import numpy as np
 
 from ..registration.solver import Criteria, mean_distance, solve
 
-__all__ = ["refine", "per_touch", "fit_stage", "JOINT_ITERATIONS", "REFINED"]
+__all__ = ["refine", "per_touch", "fit_stage", "JOINT_ITERATIONS", "REFINED", "HISTORY"]
 
 #: Gauss-Newton steps of a joint refinement, and how many candidate poses per model are refined
 JOINT_ITERATIONS, REFINED = 15, 2
