@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from .kernels import _rodrigues
+from .kernels import _cholesky_solve, _rodrigues
 
 __all__ = ["anderson"]
 
@@ -69,8 +69,8 @@ def _pose(R0, t0, u, reach, R, t):
 @njit(cache=True, nogil=True)
 def _mix(U, G, n, gamma):
     """The least-squares weights ``gamma (n - 1,)`` of the last ``n`` residuals ``G - U`` (rows):
-    ``min |f_last - dF gamma|`` by its normal equations (Cholesky, a relative ridge of 1e-10).
-    False where they are singular."""
+    ``min |f_last - dF gamma|`` by its normal equations (a relative ridge of 1e-10,
+    :func:`tactrec.engine.kernels._cholesky_solve`).  False where they are singular."""
     p = n - 1
     dF = np.empty((p, 6))
     for j in range(p):
@@ -94,31 +94,7 @@ def _mix(U, G, n, gamma):
         return False
     for a in range(p):
         A[a, a] += 1e-10 * trace
-    L = np.zeros((p, p))
-    for j in range(p):
-        s = A[j, j]
-        for k in range(j):
-            s -= L[j, k] * L[j, k]
-        if not s > 0.0:
-            return False
-        L[j, j] = np.sqrt(s)
-        for i in range(j + 1, p):
-            s = A[i, j]
-            for k in range(j):
-                s -= L[i, k] * L[j, k]
-            L[i, j] = s / L[j, j]
-    y = np.empty(p)
-    for i in range(p):
-        s = b[i]
-        for k in range(i):
-            s -= L[i, k] * y[k]
-        y[i] = s / L[i, i]
-    for i in range(p - 1, -1, -1):
-        s = y[i]
-        for k in range(i + 1, p):
-            s -= L[k, i] * gamma[k]
-        gamma[i] = s / L[i, i]
-    return True
+    return _cholesky_solve(A, b, gamma)
 
 
 @njit(cache=True, parallel=True)

@@ -171,32 +171,34 @@ def field_best(index, bricks, origin, inv_h, quantum, truncation, frames, places
 
 
 @njit(cache=True, nogil=True)
-def _solve6(A, b, out):
-    """``A out = b`` for a symmetric positive definite ``A (6, 6)`` (Cholesky, in place on copies)."""
-    L = np.zeros((6, 6))
-    for j in range(6):
+def _cholesky_solve(A, b, out):
+    """``A out = b`` for a symmetric positive definite ``A (n, n)`` (Cholesky, in place on copies):
+    False (``out`` zero) where a pivot is not positive."""
+    n = A.shape[0]
+    L = np.zeros((n, n))
+    for j in range(n):
         s = A[j, j]
         for k in range(j):
             s -= L[j, k] * L[j, k]
         if s <= 0.0:
-            for i in range(6):
+            for i in range(n):
                 out[i] = 0.0
             return False
         L[j, j] = np.sqrt(s)
-        for i in range(j + 1, 6):
+        for i in range(j + 1, n):
             s = A[i, j]
             for k in range(j):
                 s -= L[i, k] * L[j, k]
             L[i, j] = s / L[j, j]
-    y = np.empty(6)
-    for i in range(6):
+    y = np.empty(n)
+    for i in range(n):
         s = b[i]
         for k in range(i):
             s -= L[i, k] * y[k]
         y[i] = s / L[i, i]
-    for i in range(5, -1, -1):
+    for i in range(n - 1, -1, -1):
         s = y[i]
-        for k in range(i + 1, 6):
+        for k in range(i + 1, n):
             s -= L[k, i] * out[k]
         out[i] = s / L[i, i]
     return True
@@ -261,7 +263,7 @@ def _damped_solve(A, b, out):
     damp = 1e-6 * (trace / 6.0 + 1e-12)
     for p in range(6):
         A[p, p] += damp
-    return _solve6(A, b, out)
+    return _cholesky_solve(A, b, out)
 
 
 @njit(cache=True, nogil=True)
@@ -366,18 +368,17 @@ def plane_step(R, t, moved, normals, residuals):
 def warm() -> None:
     """Load every kernel's compiled code (from numba's cache, or compiling it) by calling each once on
     a tiny empty field, with the argument types and layouts a search passes."""
+    from .anderson import anderson
+
     field = (np.full((1, 1, 1), -1, dtype=np.int32), np.zeros((1, BRICK + 1, BRICK + 1, BRICK + 1), dtype=np.int16),
              np.zeros(3), 1.0, 1.0, 1.0)
     points = np.zeros((2, 3))
+    eye = np.ascontiguousarray(np.broadcast_to(np.eye(3), (2, 3, 3)))
     field_lookup(*field, points)
     field_gradient(*field, points)
     turned = screen_rotations(points, 2)
-    field_best(*field, np.ascontiguousarray(np.broadcast_to(np.eye(3), (2, 3, 3))), points, turned)
-    field_refine(*field, np.ascontiguousarray(np.broadcast_to(np.eye(3), (2, 3, 3))), points, points, 1)
-    plane_step(np.ascontiguousarray(np.broadcast_to(np.eye(3), (2, 3, 3))), points, np.zeros((2, 2, 3)),
-               np.zeros((2, 2, 3)), np.zeros((2, 2)))
-    from .anderson import anderson
-
-    eye = np.ascontiguousarray(np.broadcast_to(np.eye(3), (2, 3, 3)))
+    field_best(*field, eye, points, turned)
+    field_refine(*field, eye, points, points, 1)
+    plane_step(eye, points, np.zeros((2, 2, 3)), np.zeros((2, 2, 3)), np.zeros((2, 2)))
     anderson(eye, points, eye, points, eye, points, np.zeros((2, 4, 6)), np.zeros((2, 4, 6)), np.zeros(2, dtype=np.int64),
              1.0)
