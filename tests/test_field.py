@@ -188,8 +188,16 @@ def test_the_preload_loads_every_kernel_a_search_calls(scans):
     from tactrec.simulation import simulate_random_touch
 
     preload().join()
-    names = ("field_lookup", "field_gradient", "screen_rotations", "field_best", "field_refine")
-    loaded = {name: list(getattr(kernels, name).signatures) for name in names}
+    from tactrec.engine import anderson
+
+    compiled = [getattr(kernels, name) for name in ("field_lookup", "field_gradient", "screen_rotations",
+                                                    "field_best", "field_refine", "plane_step")]
+    compiled.append(anderson.anderson)
+
+    def signatures():
+        return {kernel.__name__: list(kernel.signatures) for kernel in compiled}
+
+    loaded = signatures()
     assert all(len(s) == 1 for s in loaded.values())
     depth = 0
     with Recognizer(scans.entries) as recognizer:
@@ -201,4 +209,4 @@ def test_the_preload_loads_every_kernel_a_search_calls(scans):
             if depth >= 2:
                 break
     assert depth >= 2
-    assert {name: list(getattr(kernels, name).signatures) for name in names} == loaded
+    assert signatures() == loaded
