@@ -52,7 +52,7 @@ def free_poses(session, model, best, use: np.ndarray, x: np.ndarray) -> np.ndarr
             t.append(dR @ (best.translation - q) + q + a * slide)
     if not R:
         return distinct(session, best, np.empty((0, 3, 3)), np.empty((0, 3)))
-    R, t, _ = refine(model, np.array(R), np.array(t), x, FAMILY_ITERATIONS)
+    R, t = refine(model, np.array(R), np.array(t), x, FAMILY_ITERATIONS)
     per = per_touch(model, R, t, [f.points for f in session.features], best.scale)
     fits = session.consistent(best.model, per)[:, use].all(axis=1)
     return distinct(session, best, R[fits], t[fits])

@@ -20,9 +20,10 @@ HISTORY = 3
 def refine(model, R: np.ndarray, t: np.ndarray, x: np.ndarray, iterations: int):
     """Poses ``R (h, 3, 3), t (h, 3)`` refined on points ``x (m, 3)`` (model units) by the one
     point-to-plane solver (:func:`tactrec.registration.solver.solve`, accelerated from :data:`HISTORY`
-    steps): ``R, t, error (h,)``."""
-    fit = solve(model, R, t, x, Criteria(iterations, history=HISTORY))
-    return fit.R, fit.t, fit.error
+    steps): ``R, t``.  Its callers score the poses per touch (:func:`per_touch`), so the solver
+    predicts its last errors rather than querying every point once more."""
+    fit = solve(model, R, t, x, Criteria(iterations, predict=True, history=HISTORY))
+    return fit.R, fit.t
 
 
 def per_touch(model, R: np.ndarray, t: np.ndarray, points: list, scale: float) -> np.ndarray:
@@ -47,7 +48,7 @@ def fit_stage(held, indices, points: list, weight: np.ndarray, items: list) -> l
         total = (per * weight).sum(axis=1)                  # element-wise: no BLAS kernel in the ranking
         best = np.argsort(total, kind="stable")[:REFINED]
         # one batch: every pose's steps and stopping are its own, as if refined alone
-        Rb, tb, _ = refine(model, R[best], t[best], x, JOINT_ITERATIONS)
+        Rb, tb = refine(model, R[best], t[best], x, JOINT_ITERATIONS)
         per_b = per_touch(model, Rb, tb, points, scale)
         fitted = []
         for j, k in enumerate(best):
