@@ -129,7 +129,7 @@ def solve(model, R: np.ndarray, t: np.ndarray, x: np.ndarray, criteria: Criteria
                 queries += len(back) * moved.shape[1]
         finite = np.all(np.isfinite(residual), axis=1) & np.all(np.isfinite(n), axis=(1, 2))
         active, moved, residual, n = active[finite], moved[finite], residual[finite], n[finite]
-        before = (R[active], t[active])
+        before = (R[active], t[active]) if speed is not None else None          # where the steps start from
         R[active], t[active], delta, after = step(R[active], t[active], moved, n, residual)
         if criteria.predict:
             predicted[active] = after
