@@ -383,18 +383,18 @@ def test_database_keeps_the_curvature_field_and_rejects_a_corrupted_one(tmp_path
 
 def test_probabilities_and_the_ambiguity_flag_in_the_json(table1):
     """Two identical models cannot be told apart: half each, flagged; a clear winner is not
-    flagged and carries almost all the probability; accepted models' probabilities sum to 1."""
+    flagged and carries almost all the probability; accepted models' probabilities and unknown's sum to 1."""
     entry = table1.get("ellipsoid")
     twin = type(entry)(load_model("ellipsoid"), entry.table)
     touch = simulate_random_touch(entry.model, rng=2, **P)
     clear = recognize(touch, table1).to_json()
     assert clear["best"] == "ellipsoid" and clear["ambiguous"] is False and clear["confidence"] > 0.95
     accepted = [r for r in clear["ranking"] if r["error"] is not None]
-    assert abs(sum(r["probability"] for r in accepted) - 1.0) < 1e-9
+    assert abs(sum(r["probability"] for r in accepted) + clear["unknown"] - 1.0) < 1e-9
     assert clear["ranking"][0]["probability"] == clear["confidence"]
     same = recognize(touch, [entry, twin]).to_json()
     assert same["ambiguous"] is True
-    assert all(abs(r["probability"] - 0.5) < 0.05 for r in same["ranking"])
+    assert all(abs(r["probability"] - 0.5) < 0.05 for r in same["ranking"]) and same["unknown"] < 0.05
 
 
 def test_starting_poses_put_the_contact_on_candidate_vertices(scans):

@@ -76,6 +76,25 @@ def _nonnegative(text: str) -> float:
     return value
 
 
+def _prior(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not 0.0 <= value < 1.0:
+        raise argparse.ArgumentTypeError(f"a probability in [0, 1) expected, not {text!r}")
+    return value
+
+
+def unknown_prior_option(p) -> None:
+    """``--unknown-prior P``: the prior probability that the object is none of the models."""
+    from .probability import UNKNOWN_PRIOR
+
+    p.add_argument("--unknown-prior", type=_prior, default=UNKNOWN_PRIOR, metavar="P",
+                   help="prior probability that the object is none of the database's models "
+                   f"(default {UNKNOWN_PRIOR:g}; 0: every touch is of some model)")
+
+
 def _count(minimum: int):
     def parse(text: str) -> int:
         try:
@@ -141,7 +160,8 @@ def cmd_recognize(args) -> int:
         if loading is not None:
             loading.join()
     workers = default_workers() if len(db) > 4 else 1
-    with Recognizer(db, method=args.method, workers=workers, **_recognition_options(args)) as recognizer:
+    with Recognizer(db, method=args.method, workers=workers, unknown_prior=args.unknown_prior,
+                    **_recognition_options(args)) as recognizer:
         results = [recognize_session(recognizer, x).result if isinstance(x, list) else recognizer.recognize(x)
                    for x in inputs]
     out_lines = []
@@ -158,7 +178,7 @@ def cmd_recognize(args) -> int:
 
 def _format_result(name: str, result) -> str:
     est = result.estimate
-    flag = f", confidence {result.confidence:.3f}" if result.best else ""
+    flag = f", confidence {result.confidence:.3f}, unknown {result.unknown:.3f}" if result.best else ""
     flag += ", ambiguous" if result.ambiguous else ""
     if not result.settled:
         flag += ", unsettled: the search's budget ran out before a fit within the noise"
@@ -282,6 +302,7 @@ def build_parser() -> argparse.ArgumentParser:
                    "normal tried (method fast; default 300000, about 0.25 s here on two cores): more buys certainty "
                    "with time")
     _mesh_options(p)
+    unknown_prior_option(p)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_recognize)
 
@@ -289,6 +310,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_next_parser(sub, positive=_positive, mesh_options=_mesh_options, methods=METHODS,
                     default_method=DEFAULT_METHOD)
+    unknown_prior_option(sub.choices["next"])
     sub.choices["next"].set_defaults(func=cmd_next)
 
     p = sub.add_parser("simulate", help="generate tactile data on a model")

@@ -53,10 +53,11 @@ def cmd_bench(args) -> int:
     if args.sets is not None:
         from .bench.calibration import SETS as CALIBRATION_SETS
         from .bench.multi_touch import SETS as SESSION_SETS
+        from .bench.open_world import SCAN_SETS as OPEN_SETS
 
-        known = {"calibration": CALIBRATION_SETS, "multi-touch": SESSION_SETS}.get(args.name)
+        known = {"calibration": CALIBRATION_SETS, "multi-touch": SESSION_SETS, "open-world": OPEN_SETS}.get(args.name)
         if known is None:
-            raise InputError("--sets applies to calibration and multi-touch only", args.name)
+            raise InputError("--sets applies to calibration, multi-touch and open-world only", args.name)
         extra["sets"] = _known(args.sets, known, "set", "--sets", args.name)
     if args.strategies is not None:
         from .bench.multi_touch import STRATEGIES

@@ -28,8 +28,8 @@ def format_session(name: str, result) -> str:
     """The text form of a session's result."""
     slipped = f", slipped touches {list(result.slipped)}" if result.slipped else ""
     flag = ", ambiguous" if result.ambiguous else ""
-    lines = [f"{name}: {result.touches} touches, best {result.best}   (confidence {result.confidence:.3f}"
-             f"{flag}{slipped}; {result.seconds:.2f} s)"]
+    lines = [f"{name}: {result.touches} touches, best {result.best}   (confidence {result.confidence:.3f}, "
+             f"unknown {result.unknown:.3f}{flag}{slipped}; {result.seconds:.2f} s)"]
     p = result.probabilities
     for rank, h in enumerate(result.ranking, start=1):
         per = ", ".join(f"{e:.4g}" for e in h.per_touch)
@@ -55,7 +55,8 @@ def cmd_next(args, *, open_models, options, warn) -> int:
     tolerance = args.tolerance if args.tolerance is not None else _in_units(DEFAULT_TOLERANCE_MM, units)
     db = open_models(db=args.db, models=args.models, warn=warn, quiet=args.quiet, units=args.units, scale=args.scale)
     workers = default_workers() if len(db) > 4 else 1
-    with Recognizer(db, method=args.method, workers=workers, **options) as recognizer:
+    with Recognizer(db, method=args.method, workers=workers, unknown_prior=args.unknown_prior,
+                    **options) as recognizer:
         session = recognize_session(recognizer, touches)
         if not session.result.ranking:
             raise InputError("no model fits any touch of the session: nothing to propose", args.session)

@@ -44,7 +44,8 @@ def run_demo(*, seed: int = 0, out="tactrec-demo.png", quiet: bool = True) -> di
              f"touched: {model.name} at vertex {vertex}, ({', '.join(f'{x:.1f}' for x in truth['contact'])}) mm; "
              f"3 curves x {points} points, {SPACING} mm apart, planes {ANGLE:g} degrees apart, sensor frame",
              f"estimated curvatures k1 = {result.estimate.k1:.4g} /mm, k2 = {result.estimate.k2:.4g} /mm",
-             f"recognised: {result.best} in {result.seconds:.1f} s, confidence {result.confidence:.3f} "
+             f"recognised: {result.best} in {result.seconds:.1f} s, confidence {result.confidence:.3f}, "
+             f"unknown {result.unknown:.3f} "
              f"({'correct' if result.best == model.name else 'WRONG'}"
              f"{'; ambiguous: confidence below the threshold' if result.ambiguous else ''})", "ranking:"]
     for rank, r in enumerate(result.ranking, start=1):

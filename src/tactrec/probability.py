@@ -29,13 +29,32 @@ replicates in which it has the least (ties shared).
   residuals, at most the shortest curve), which keeps that dependence in
   every replicate.
 
+The open world.  Those shares compare the models with each other only.  A
+robot also touches objects it was never taught, so the probabilities weigh
+``unknown`` too (:func:`open_world`): each model's share is weighted by how
+well its pose fits the data under their own noise, the fit test as a
+likelihood.  A touch's mean distance to the true model's pose is the noise's
+(:func:`fit_limit`, on noise-free data ``floor`` x the touch's radius); its
+excess beyond that, in standard errors of the fit and of the noise estimate
+together (:func:`fit_spread`), is Gaussian with unit variance when the model
+is the true one.  ``unknown`` explains any touch as well as a model at the
+test's edge (:data:`CONSISTENT_SE` standard errors out), and its prior
+(:data:`UNKNOWN_PRIOR`, settable) weighs it against the models together.  The
+search may miss the true pose (:data:`SEARCH_MISS`): a model beyond the test
+keeps that much of the edge's likelihood, so that a touch whose search did
+not settle is never sure either way.  In a session every kept touch is
+evidence, each counted at the excess of the touch the model's joint pose
+fits worst: the pose must fit each of them, and each touch it fits makes
+unknown less likely.
+
 Nothing comes from a simulation setting: the scatter is the touch's own.
 Models the search rejected or deferred have no probability; the accepted
-models' probabilities sum to one.  The replicates are drawn from a fixed seed
-and averaged without BLAS, so the same touch gives the same probabilities on
-every machine.  ``tactrec bench calibration`` measures how well the
-confidence matches the share of right answers.  ``confidence`` is the best model's probability; a result is
-``ambiguous`` when it is below :data:`AMBIGUOUS`.
+models' probabilities and ``unknown``'s sum to one.  The replicates are drawn
+from a fixed seed and averaged without BLAS, so the same touch gives the same
+probabilities on every machine.  ``tactrec bench calibration`` and
+``tactrec bench open-world`` measure how well the confidence matches the
+share of right answers.  ``confidence`` is the best model's probability; a
+result is ``ambiguous`` when it is below :data:`AMBIGUOUS`.
 """
 
 from __future__ import annotations
@@ -46,12 +65,25 @@ from typing import Sequence
 import numpy as np
 
 __all__ = ["Evidence", "residuals", "evidence", "bootstrap_probabilities", "noise_fit", "fit_limit",
-           "fit_standard_error", "AMBIGUOUS", "REPLICATES"]
+           "fit_standard_error", "fit_spread", "open_world", "AMBIGUOUS", "REPLICATES", "UNKNOWN_PRIOR",
+           "CONSISTENT_SE", "NOISE_VARIANCE", "SEARCH_MISS"]
 
 #: a result is ambiguous when its confidence (the best model's probability) is below this
 AMBIGUOUS = 0.95
 #: bootstrap replicates, and the seed they are drawn from
 REPLICATES, SEED = 2000, 20_261_123
+#: the prior probability that a touch (or session) comes from none of the database's models
+UNKNOWN_PRIOR = 0.5
+#: the probability that the search leaves the touched model's true pose unfound, its best pose beyond the fit
+#: test: the share of known P3 touches that do so in ``tactrec bench open-world`` (5 of 50 on the ten
+#: ``paper-fig11`` scans; its ``own model beyond the test`` column)
+SEARCH_MISS = 0.1
+#: the fit test's allowance: a mean distance fits when within this many of its standard errors of a fit
+CONSISTENT_SE = 3.0
+#: the relative variance of the noise estimate (:func:`tactrec.estimation.noise_level`, the median over
+#: three curves) times the points it is taken over, for white Gaussian noise: 1.14, 1.10, 1.04 and 1.01
+#: on 21, 41, 81 and 161 points a curve (4,000 draws each; ``tests/test_probability.py`` checks it)
+NOISE_VARIANCE = 1.1
 
 
 def noise_fit(sigma: float) -> float:
@@ -73,6 +105,55 @@ def fit_standard_error(fit: float, points: int) -> float:
     return float(fit) * np.sqrt(np.pi / 2.0 - 1.0) / np.sqrt(points)
 
 
+def fit_spread(limit: float, points: int) -> float:
+    """The standard error of a fit's mean distance, measured against ``limit`` (:func:`fit_limit`)
+    over ``points`` points, when the model is the true one: the mean distance's own spread
+    (:func:`fit_standard_error`) and that of the noise estimate the limit comes from
+    (:data:`NOISE_VARIANCE`), ``limit sqrt((pi / 2 - 1 + NOISE_VARIANCE) / points)``."""
+    return float(limit) * np.sqrt((np.pi / 2.0 - 1.0 + NOISE_VARIANCE) / max(int(points), 1))
+
+
+def open_world(shares: np.ndarray, excess: np.ndarray, prior: float = UNKNOWN_PRIOR,
+               miss: float = SEARCH_MISS, touches: int = 1) -> tuple[np.ndarray, float]:
+    """Each model's probability and that of ``unknown`` (none of them), summing to 1.
+
+    ``shares (k,)``: each model's share of the bootstrap replicates it fits best in (sum 1);
+    ``excess (k,)``: by how many standard errors (:func:`fit_spread`) its pose's mean distance
+    exceeds the fit limit on the touch it fits worst, of ``touches``.
+
+    The fit test as a likelihood, per touch: the data fit a model's pose with likelihood
+    ``exp(-max(z, 0)^2 / 2)``, 1 within the noise, and ``unknown`` explains any touch as well as a
+    model at the test's edge, ``z = CONSISTENT_SE``.  Every touch is counted at the worst touch's
+    excess, so that one touch the pose does not fit is not outweighed by the others: relative to
+    unknown, the pose's touches weigh ``F = exp(-touches (max(excess, 0)^2 - CONSISTENT_SE^2) / 2)``.
+    The search may have missed the touched model's true pose (with probability ``miss``), leaving
+    poses that fit no better than an unrelated object's: then its touches weigh as unknown's.  With
+    the prior ``prior`` for unknown, ``p(M) ~ (1 - prior) share(M) ((1 - miss) F + miss)`` and
+    ``p(unknown) ~ prior``.
+
+    So a model whose pose fails the test on some touch never takes more than ``1 - prior`` of the
+    probability, and far beyond the edge at most ``(1 - prior) miss / ((1 - prior) miss + prior)``;
+    one within the noise on every touch leaves unknown about
+    ``prior exp(-touches CONSISTENT_SE^2 / 2) / (1 - prior)``, less with every touch."""
+    if not 0.0 <= prior < 1.0:
+        raise ValueError(f"the prior of unknown must lie in [0, 1), not {prior!r}")
+    if not 0.0 <= miss < 1.0:
+        raise ValueError(f"the search's miss rate must lie in [0, 1), not {miss!r}")
+    shares = np.asarray(shares, dtype=np.float64)
+    if len(shares) == 0:
+        return np.zeros(0), 1.0
+    z = np.maximum(np.asarray(excess, dtype=np.float64), 0.0)
+    n = max(int(touches), 1)
+    with np.errstate(under="ignore", over="ignore"):
+        weight = np.exp(np.minimum(-0.5 * n * (z * z - CONSISTENT_SE ** 2), 600.0))
+        known = (1.0 - prior) * shares * ((1.0 - miss) * weight + miss)
+    unknown = float(prior)
+    total = float(known.sum()) + unknown
+    if total <= 0.0:                                                  # a closed world and no pose near a fit
+        return shares, 0.0
+    return known / total, unknown / total
+
+
 def residuals(model, rotation: np.ndarray, translation: np.ndarray, points: np.ndarray,
               scale: float = 1.0) -> np.ndarray:
     """Signed distances ``(m,)`` of data ``points (m, 3)`` (data units) to ``model`` under the pose
@@ -83,7 +164,7 @@ def residuals(model, rotation: np.ndarray, translation: np.ndarray, points: np.n
 
 @dataclasses.dataclass(frozen=True)
 class Evidence:
-    """What the probabilities are computed from, per touch.
+    """What the probabilities are computed from.
 
     Attributes
     ----------
@@ -97,6 +178,11 @@ class Evidence:
         Lag-one autocorrelation of the best model's signed residuals along the curves.
     noise : float
         The data's noise sigma per coordinate (third differences), data units; reported only.
+    limits : tuple of float
+        Per touch, the largest mean distance still a fit (:func:`fit_limit`), data units; empty for
+        a closed world (no ``unknown``: the probabilities compare the models only).
+    touches : tuple of int
+        Curves per touch, in order (empty: all the curves are one touch).
     """
 
     models: tuple
@@ -104,6 +190,8 @@ class Evidence:
     curve_sizes: tuple
     rho: float
     noise: float = 0.0
+    limits: tuple = ()
+    touches: tuple = ()
 
     @property
     def block(self) -> int:
@@ -111,19 +199,58 @@ class Evidence:
         rho = float(np.clip(self.rho, 0.0, 0.999))
         return int(np.clip(round((1.0 + rho) / (1.0 - rho)), 1, max(1, min(self.curve_sizes, default=1))))
 
-    def probabilities(self, *, replicates: int = REPLICATES, rng=SEED) -> np.ndarray:
+    def shares(self, *, replicates: int = REPLICATES, rng=SEED) -> np.ndarray:
         """Each model's share of the bootstrap replicates it fits best in, ``(k,)`` (sum 1)."""
         return bootstrap_probabilities(self.distances, self.curve_sizes, block=self.block, replicates=replicates,
                                        rng=rng)
 
+    def touch_points(self) -> np.ndarray:
+        """Points per touch ``(T,)``."""
+        sizes = np.asarray(self.curve_sizes, dtype=np.int64)
+        per = self.touches or (len(sizes),)
+        return np.add.reduceat(sizes, np.concatenate([[0], np.cumsum(per)[:-1]])) if len(sizes) else np.zeros(0, int)
+
+    def excess(self) -> np.ndarray:
+        """Per model ``(k,)``: by how many standard errors (:func:`fit_spread`) its pose's mean distance
+        exceeds the fit limit on the touch it fits worst (negative within the noise)."""
+        k = len(self.models)
+        if not self.limits or k == 0:
+            return np.full(k, -np.inf)
+        points = self.touch_points()
+        bounds = np.concatenate([[0], np.cumsum(points)])
+        z = np.empty((k, len(points)))
+        for j, (limit, m) in enumerate(zip(self.limits, points)):
+            mean = self.distances[:, bounds[j]:bounds[j + 1]].sum(axis=1) / max(int(m), 1)   # no BLAS
+            spread = fit_spread(limit, m)
+            z[:, j] = (mean - limit) / spread if spread > 0 else np.where(mean > limit, np.inf, -np.inf)
+        return z.max(axis=1)
+
+    def outcomes(self, *, prior: float = UNKNOWN_PRIOR, miss: float = SEARCH_MISS, replicates: int = REPLICATES,
+                 rng=SEED) -> tuple[np.ndarray, float]:
+        """Each model's probability ``(k,)`` and that of ``unknown`` (:func:`open_world`; sum 1).  Without
+        ``limits`` (a closed world) unknown is 0 and the models' probabilities are their shares."""
+        shares = self.shares(replicates=replicates, rng=rng)
+        if not self.limits:
+            return shares, 0.0
+        return open_world(shares, self.excess(), prior, miss, max(len(self.limits), 1))
+
+    def probabilities(self, *, prior: float = UNKNOWN_PRIOR, replicates: int = REPLICATES,
+                      rng=SEED) -> np.ndarray:
+        """Each model's probability ``(k,)`` (:meth:`outcomes`)."""
+        return self.outcomes(prior=prior, replicates=replicates, rng=rng)[0]
+
     def to_json(self) -> dict:
-        return {"models": list(self.models), "distances": np.round(self.distances, 7).tolist(),
-                "curve_sizes": list(self.curve_sizes), "rho": self.rho, "noise": self.noise}
+        out = {"models": list(self.models), "distances": np.round(self.distances, 7).tolist(),
+               "curve_sizes": list(self.curve_sizes), "rho": self.rho, "noise": self.noise,
+               "limits": [float(x) for x in self.limits], "touches": list(self.touches)}
+        return out
 
     @classmethod
     def from_json(cls, d: dict) -> "Evidence":
-        return cls(tuple(d["models"]), np.asarray(d["distances"], dtype=np.float64).reshape(len(d["models"]), -1),
-                   tuple(int(n) for n in d["curve_sizes"]), float(d["rho"]), float(d.get("noise", 0.0)))
+        k = len(d["models"])
+        return cls(tuple(d["models"]), np.asarray(d["distances"], dtype=np.float64).reshape(k, -1),
+                   tuple(int(n) for n in d["curve_sizes"]), float(d["rho"]), float(d.get("noise", 0.0)),
+                   tuple(float(x) for x in d.get("limits", ())), tuple(int(n) for n in d.get("touches", ())))
 
 
 def _lag_one(res: Sequence[np.ndarray]) -> float:
@@ -140,14 +267,15 @@ def _lag_one(res: Sequence[np.ndarray]) -> float:
 
 
 def evidence(models: Sequence[str], signed: Sequence[np.ndarray], curve_sizes: Sequence[int],
-             noise: float = 0.0) -> Evidence:
+             noise: float = 0.0, *, limits: Sequence[float] = (), touches: Sequence[int] = ()) -> Evidence:
     """The :class:`Evidence` from each accepted model's signed residuals ``(m,)`` (best model first;
-    curves in order, ``curve_sizes`` points each)."""
+    curves in order, ``curve_sizes`` points each; ``limits`` and ``touches`` as there)."""
     sizes = tuple(int(n) for n in curve_sizes)
     m = sum(sizes)
     rows = [np.abs(np.asarray(r, dtype=np.float64)) for r in signed]
     rho = _lag_one(np.split(np.asarray(signed[0], dtype=np.float64), np.cumsum(sizes)[:-1])) if rows else 0.0
-    return Evidence(tuple(models), np.array(rows).reshape(len(rows), m), sizes, float(rho), float(noise))
+    return Evidence(tuple(models), np.array(rows).reshape(len(rows), m), sizes, float(rho), float(noise),
+                    tuple(float(x) for x in limits), tuple(int(n) for n in touches))
 
 
 def _draws(curve_sizes: Sequence[int], block: int, replicates: int, rng) -> np.ndarray:

@@ -27,7 +27,7 @@ from .estimation import LocalGeometry
 from .features import Touch
 from .io.touch import TactileData
 from .methods import DEFAULT_METHOD, get_method
-from .probability import AMBIGUOUS, Evidence, evidence, residuals
+from .probability import AMBIGUOUS, UNKNOWN_PRIOR, Evidence, evidence, fit_limit, residuals
 from .registration.result import Registration
 from .tables import CurvatureTable
 
@@ -74,6 +74,8 @@ class Recognition:
         The touch as recognition saw it (points, estimate, noise), for callers that go on with it.
     allowed : int or None
         The most work the search could spend (``fast``: its budget; None for a method without one).
+    unknown_prior : float
+        The prior probability that the touch came from none of the models (:mod:`tactrec.probability`).
     """
 
     best: str | None
@@ -87,14 +89,25 @@ class Recognition:
     depth: int = 1
     touch: Touch | None = None
     allowed: int | None = None
+    unknown_prior: float = UNKNOWN_PRIOR
 
     @functools.cached_property
-    def probabilities(self) -> dict[str, float]:
-        """Each accepted model's probability that the data came from it (sum 1; see
-        :mod:`tactrec.probability`)."""
+    def _outcomes(self) -> tuple[dict[str, float], float]:
         if self.evidence is None:
-            return {}
-        return dict(zip(self.evidence.models, self.evidence.probabilities().tolist()))
+            return {}, 1.0 if self.best is None else 0.0
+        p, unknown = self.evidence.outcomes(prior=self.unknown_prior)
+        return dict(zip(self.evidence.models, p.tolist())), unknown
+
+    @property
+    def probabilities(self) -> dict[str, float]:
+        """Each accepted model's probability that the data came from it (with :attr:`unknown`, sum 1;
+        see :mod:`tactrec.probability`)."""
+        return self._outcomes[0]
+
+    @property
+    def unknown(self) -> float:
+        """The probability that the data came from none of the models (INTERFACE.md, Probabilities)."""
+        return self._outcomes[1]
 
     @property
     def confidence(self) -> float:
@@ -133,6 +146,7 @@ class Recognition:
             "curvatures": [self.estimate.k1, self.estimate.k2],
             "method": self.method,
             "confidence": self.confidence,
+            "unknown": self.unknown,
             "ambiguous": self.ambiguous,
             "located": self.located,
             "settled": self.settled,
@@ -140,6 +154,8 @@ class Recognition:
         }
 
 
+#: on noise-free data a fit is within this fraction of the touch's radius, for a method without a ``floor`` of its own
+FLOOR = 1e-3
 #: the data leave the contact free when its spread (the root of the trace of its covariance under the
 #: fit) exceeds this many times the fit's mean residual: the dilution of precision of a direction
 #: the data do not constrain (on YCB scans, the median is 3 for P3 touches and 6 for hard ones)
@@ -242,13 +258,20 @@ class Recognizer:
         once, after the models are prepared, and ended by :meth:`close` or the ``with`` block.
     window, degree, curvature_method
         Passed to :func:`tactrec.estimation.estimate`.
+    unknown_prior : float
+        The prior probability that a touch came from none of the models, in [0, 1)
+        (:data:`~tactrec.probability.UNKNOWN_PRIOR`; 0: a closed world).
     **options
         The method's options (its :class:`~tactrec.methods.base.Config`); a name it does not
         know is an :class:`~tactrec.errors.InputError`.
     """
 
     def __init__(self, models: Iterable[ModelEntry], *, method: str = DEFAULT_METHOD, workers: int = 1,
-                 window: int | str | None = "auto", degree: int = 3, curvature_method: str = "auto", **options):
+                 window: int | str | None = "auto", degree: int = 3, curvature_method: str = "auto",
+                 unknown_prior: float = UNKNOWN_PRIOR, **options):
+        if not (isinstance(unknown_prior, (int, float)) and 0.0 <= unknown_prior < 1.0):
+            raise InputError(f"the prior of unknown must be a number in [0, 1), not {unknown_prior!r}", "unknown_prior")
+        self.unknown_prior = float(unknown_prior)
         self.method = get_method(method)
         self.config = self.method.configure(**options)
         self.models = list(models)
@@ -312,10 +335,17 @@ class Recognizer:
         ranking = sorted(outcome.ranking, key=_rank_key)
         best = ranking[0].model if ranking and ranking[0].ok else None
         ok = [r for r in ranking if r.ok]
+        limit = max(fit_limit(touch, self.floor), touch.fit)
         found = evidence([r.model for r in ok], [self._residuals(r, touch) for r in ok],
-                         [len(c) for c in touch.joint_curves], touch.noise)
+                         [len(c) for c in touch.joint_curves], touch.noise, limits=(limit,))
         return Recognition(best, ranking, touch.estimate, time.perf_counter() - start, self.method.name, found,
-                           outcome.settled, outcome.work, outcome.depth, touch, outcome.allowed)
+                           outcome.settled, outcome.work, outcome.depth, touch, outcome.allowed, self.unknown_prior)
+
+    @property
+    def floor(self) -> float:
+        """The method's ``floor`` (a fit's mean distance per unit radius on noise-free data), or
+        :data:`FLOOR` for a method without one."""
+        return float(getattr(self.config, "floor", FLOOR))
 
     def _residuals(self, r: Registration, touch: Touch) -> np.ndarray:
         """The data's signed distances (data units) to the model of ``r`` under its pose."""

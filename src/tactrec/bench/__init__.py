@@ -9,8 +9,9 @@ from __future__ import annotations
 
 from typing import Callable
 
-from . import (baselines, calibration, cold_start, fast_vs_paper, field, fit_limit, kernels, multi_touch, paper_closedform,
-               paper_example, paper_fig11, paper_mesh, paper_steps, paper_table5, paper_table6, scale, search_limits)
+from . import (baselines, calibration, cold_start, fast_vs_paper, field, fit_limit, kernels, multi_touch, open_world,
+               paper_closedform, paper_example, paper_fig11, paper_mesh, paper_steps, paper_table5, paper_table6, scale,
+               search_limits)
 
 __all__ = ["BENCHMARKS"]
 
@@ -34,4 +35,5 @@ BENCHMARKS: dict[str, Callable[..., dict]] = {
     "calibration": calibration.run,
     "multi-touch": multi_touch.run,
     "field": field.run,
+    "open-world": open_world.run,
 }

@@ -24,6 +24,14 @@ holds 99% of the probability); its later counts keep its last answer.  Sets:
     P3 touches (contact at a vertex for the first, 24 mm curves 60 degrees
     apart, no noise, outward side known) on all 78 YCB scans against all 78;
     ``ceil(instances / 10)`` sessions per scan.
+``similar``
+    Objects that share a shape, where one touch rarely tells them apart: each
+    of the 78 YCB scans against a database of itself and the
+    :data:`SIMILAR` - 1 scans most alike in shape (:func:`similar_scans`: the
+    nearest by a scale-free signature of the convex hull, so the cans meet the
+    cans, the boxes the boxes, the cups the cups), touched as ``hard-10`` is
+    (the first touch anywhere on a face); ``ceil(instances / 10)`` sessions
+    per scan.
 
 Reported per set and strategy (:mod:`tactrec.bench.multi_touch_report`),
 after 1 to 5 touches: accuracy, mean confidence, ECE, and how often the
@@ -64,14 +72,17 @@ from . import multi_touch_report as report
 from .common import (CORE_SOURCES, instance_rng, random_face_site, recognizer, run_parallel, saved_record,
                      sources_hash, write_json)
 
-__all__ = ["run", "SETS", "TOUCHES", "STRATEGIES"]
+__all__ = ["run", "SETS", "TOUCHES", "STRATEGIES", "SIMILAR", "similar_scans", "shape_signature"]
 
-SETS = ("hard-10", "p3-78")
+SETS = ("hard-10", "p3-78", "similar")
+#: scans in a ``similar`` session's database: the touched one and those most alike in shape
+SIMILAR = 4
 STRATEGIES = ("random", "next")
 TOUCHES = 5
 #: world units (mm): how far from an earlier contact a next touch may be
 RADIUS = 40.0
 SPECS = {"hard-10": {"length": 12.0, "angle": 30.0, "noise": 0.05, "outward": False},
+         "similar": {"length": 12.0, "angle": 30.0, "noise": 0.05, "outward": False},
          "p3-78": {"length": 24.0, "angle": 60.0, "noise": 0.0, "outward": True}}
 SPACING = 0.3
 #: a random next touch: places within reach tried (a touch the estimator refuses is no place) and
@@ -88,19 +99,54 @@ def _code_hash(strategy: str) -> str:
                         "bench/fast_vs_paper.py", "bench/scale.py")
 
 
+def shape_signature(model) -> np.ndarray:
+    """A scale-free signature of a mesh's shape ``(3,)``: how much of its oriented bounding box its
+    convex hull fills (a box 1, a cylinder pi / 4, a ball pi / 6) and the ratios of the box's sorted
+    extents, middle to largest and smallest to middle."""
+    import trimesh
+
+    hull = trimesh.Trimesh(model.vertices, model.faces, process=False).convex_hull
+    box = hull.bounding_box_oriented
+    e = np.sort(np.asarray(box.primitive.extents, dtype=np.float64))[::-1]
+    return np.array([hull.volume / box.volume, e[1] / e[0], e[2] / e[1]])
+
+
+def similar_scans(entries, m_index: int, count: int = SIMILAR) -> list[int]:
+    """The indices of scan ``m_index`` and the ``count - 1`` scans of ``entries`` nearest to it by
+    :func:`shape_signature` (Euclidean; ties by index), in index order."""
+    sig = np.array([_signature(e) for e in entries])
+    d = np.linalg.norm(sig - sig[m_index], axis=1)
+    d[m_index] = -1.0
+    return sorted(int(i) for i in np.argsort(d, kind="stable")[:count])
+
+
+_SIGNATURES: dict = {}
+
+
+def _signature(entry) -> np.ndarray:
+    if entry.name not in _SIGNATURES:
+        _SIGNATURES[entry.name] = shape_signature(entry.model)
+    return _SIGNATURES[entry.name]
+
+
 def _first(kind: str, m_index: int, instance: int, seed: int):
-    """The set's database, the touched entry and the protocol's first touch."""
+    """The set's database (its entries), the touched entry and the protocol's first touch."""
     if kind == "hard-10":
         from .fast_vs_paper import _database, _simulate
 
         db = _database(tuple(BUILTIN_SETS["paper-fig11"]))
         entry = db.entries[m_index]
-        return db, entry, _simulate(entry, m_index, instance, seed, "hard")[1]
+        return db.entries, entry, _simulate(entry, m_index, instance, seed, "hard")[1]
     from . import scale
 
     db = scale._database()
     entry = db.entries[m_index]
-    return db, entry, scale._touch(entry, m_index, instance, seed)[1]
+    if kind == "similar":
+        from .fast_vs_paper import _simulate
+
+        chosen = [db.entries[i] for i in similar_scans(db.entries, m_index)]
+        return chosen, entry, _simulate(entry, m_index, instance, seed, "hard")[1]
+    return db.entries, entry, scale._touch(entry, m_index, instance, seed)[1]
 
 
 def _next_touch(strategy, session, entry, world2model, spec, rng):
@@ -163,12 +209,22 @@ def _truth(session, entry, world2model) -> dict:
 def _session(task) -> dict:
     """One strategy's session: ``task = (set, scan index, instance, seed, strategy)``."""
     kind, m_index, instance, seed, strategy = task
-    db, entry, first = _first(kind, m_index, instance, seed)
+    entries, entry, first = _first(kind, m_index, instance, seed)
+    if kind == "similar":              # a database of its own: its worker processes end with the session
+        from ..recognition import Recognizer, default_workers
+
+        with Recognizer(entries, workers=default_workers()) as own:
+            return _run_session(task, own, entry, first)
+    return _run_session(task, recognizer(entries), entry, first)
+
+
+def _run_session(task, recognizer_, entry, first) -> dict:
+    kind, m_index, instance, seed, strategy = task
     spec = SPECS[kind]
     Rw, tw = random_rigid_motion(instance_rng(seed, m_index, instance, 77), extent=200.0)
     world2model = (Rw.T, -Rw.T @ tw, 1.0)
     rng = instance_rng(seed, m_index, instance, 78 + STRATEGIES.index(strategy))
-    session = recognizer(db.entries).session()
+    session = recognizer_.session()
     steps = []
     touch, pose = first, sensor_to_world(first, (Rw, tw))
     while True:
@@ -176,7 +232,9 @@ def _session(task) -> dict:
         result = session.add(touch, pose)
         seconds = time.perf_counter() - start
         steps.append({"best": result.best, "correct": result.best == entry.name,
-                      "confidence": result.confidence, "seconds": seconds, "slipped": list(result.slipped),
+                      "confidence": result.confidence, "unknown": result.unknown, "seconds": seconds,
+                      "slipped": list(result.slipped),
+                      "evidence": None if result.evidence is None else result.evidence.to_json(),
                       "own_seconds": session.records[-1].own.seconds, "stages": dict(result.stages),
                       "truth": _truth(session, entry, world2model)})
         if len(steps) >= TOUCHES:
@@ -220,8 +278,9 @@ def run(*, out, instances: int = 10, seed: int = 0, jobs: int | None = None, qui
     tasks = []
     if "hard-10" in sets:
         tasks += [("hard-10", m, i, seed) for m in range(len(BUILTIN_SETS["paper-fig11"])) for i in range(instances)]
-    if "p3-78" in sets:
-        tasks += [("p3-78", m, i, seed) for m in range(len(ycb_names())) for i in range(math.ceil(instances / 10))]
+    for kind in ("p3-78", "similar"):
+        if kind in sets:
+            tasks += [(kind, m, i, seed) for m in range(len(ycb_names())) for i in range(math.ceil(instances / 10))]
     jobs_ = [(t + (strategy,), folders[strategy]) for t in tasks for strategy in strategies]
     records = _merged(run_parallel(_saved, jobs_, jobs=jobs or 1, quiet=quiet, desc="multi-touch"))
     by_set = {s: [r for r in records if r["set"] == s] for s in sets}

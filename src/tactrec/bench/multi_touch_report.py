@@ -16,7 +16,10 @@ import numpy as np
 from ..session import STAGES, allowed_fit
 from .calibration import expected_calibration_error
 
-__all__ = ["summary", "text", "plot", "truth_found"]
+__all__ = ["summary", "text", "plot", "truth_found", "SURE"]
+
+#: a session is sure of its answer at this confidence
+SURE = 0.95
 
 
 def truth_found(truth: dict | None) -> bool:
@@ -80,6 +83,8 @@ def summary(rows: list[dict], strategies, touches: int) -> dict:
                           "truth_found_percent": 100.0 * float(np.mean(found)) if found else None})
         decide = [next((i + 1 for i, s in enumerate(r[strategy]) if s["confidence"] >= 0.99), touches)
                   for r in rows]
+        # sure and wrong: a session whose answer at some touch count is wrong at confidence >= 0.95
+        sure_wrong = sum(any(not s["correct"] and s["confidence"] >= SURE for s in r[strategy]) for r in rows)
         adds = [s["seconds"] for r in rows for s in r[strategy][1:]]
         # an add to a session of n touches, against the added touch's own recognition: a session that
         # stops early leaves its easy adds out of the pooled median, so the medians per n are reported too
@@ -90,6 +95,7 @@ def summary(rows: list[dict], strategies, touches: int) -> dict:
             by_n.append({"touches_before": n, "adds": len(ratios), **_quantiles(ratios)})
             own += ratios
         out[strategy] = {"per_touches": per_k, "mean_touches_to_0.99": float(np.mean(decide)),
+                         "sure_wrong_sessions": int(sure_wrong),
                          "add_seconds": _quantiles(adds),
                          "add_ratio_of_medians": float(np.median(adds) / np.median(first)) if adds else None,
                          "add_over_own": _quantiles(own), "add_over_own_by_touches": by_n,
@@ -144,9 +150,9 @@ def text(table: dict) -> str:
     lines = [f"Sessions of up to {touches} touches (seed {seed}), method fast; accuracy (mean confidence) after "
              "each touch count.", "",
              "| set | strategy | " + " | ".join(f"{k} touch{'es' if k > 1 else ''}" for k in range(1, touches + 1))
-             + " | touches to 0.99 | add s median / p95 / max | add / first, medians "
+             + " | touches to 0.99 | sure (>= 0.95) and wrong | add s median / p95 / max | add / first, medians "
              "| add / the touch alone, median / p95 / max |",
-             "|---|---|" + "---|" * (touches + 4)]
+             "|---|---|" + "---|" * (touches + 5)]
     for name, s in table["summary"].items():
         for strategy in table["strategies"]:
             st = s[strategy]
@@ -157,7 +163,8 @@ def text(table: dict) -> str:
             o = st["add_over_own"]
             own = "-" if o["median"] is None else f"{o['median']:.2f} / {o['p95']:.2f} / {o['max']:.2f}"
             lines.append(f"| {name} ({s['sessions']}) | {strategy} | " + " | ".join(cells)
-                         + f" | {st['mean_touches_to_0.99']:.2f} | {adds} | {ratio} | {own} |")
+                         + f" | {st['mean_touches_to_0.99']:.2f} | {st.get('sure_wrong_sessions', '-')} | {adds} | "
+                         f"{ratio} | {own} |")
     lines += ["", "Adding a touch to a session of n touches, against the added touch's own recognition: median "
               "(adds).", "", "| set | strategy | " + " | ".join(f"n = {n}" for n in range(1, touches)) + " |",
               "|---|---|" + "---|" * (touches - 1)]

@@ -75,6 +75,7 @@ from ..io.session import SessionTouch, rigid_pose
 from ..io.touch import TactileData
 from ..linalg import clearly_less
 from ..probability import evidence, fit_limit, residuals
+from ..recognition import FLOOR
 from . import family as _family
 from .fit import fit_stage
 from .record import TouchRecord, allowed_fit, fits
@@ -82,8 +83,6 @@ from .result import Hypothesis, SessionResult
 
 __all__ = ["Session", "STAGES", "FLOOR", "STARTS"]
 
-#: on noise-free data a fit is within this fraction of the touch's radius, for a method without a ``floor`` of its own
-FLOOR = 1e-3
 #: step 5 searches from this many touches, newest first: the new one and the one kept before it (a
 #: noisy touch's normal may be too far off for the screen to pose the truth from it; another
 #: touch's may not), so a touch may be searched from when it is added and when the next one is
@@ -226,7 +225,7 @@ class Session:
     @property
     def floor(self) -> float:
         """The method's ``floor`` (a fit's mean distance per unit radius on noise-free data), or :data:`FLOOR`."""
-        return getattr(self.recognizer.config, "floor", FLOOR)
+        return self.recognizer.floor
 
     def _reference(self, model: str | None = None) -> np.ndarray:
         """Per touch ``(N,)``, data units: the fit its own search reached on ``model`` (None: on its
@@ -362,8 +361,11 @@ class Session:
             x = np.concatenate([self.records[i].points for i in keep])
             curves = [len(c) for i in keep for c in self.features[i].curves]
             signed = [residuals(by_name[h.model].model, h.rotation, h.translation, x, h.scale) for h in ranked]
-            ev = evidence([h.model for h in ranked], signed, curves, float(np.median([f.noise for f in self.features])))
+            ev = evidence([h.model for h in ranked], signed, curves, float(np.median([f.noise for f in self.features])),
+                          limits=[fit_limit(self.features[i], self.floor) for i in keep],
+                          touches=[len(self.features[i].curves) for i in keep])
         rejected = {e.name: "no pose from any touch" for e in self.recognizer.models if e.name not in found}
-        return SessionResult(ranked, ev, slipped, n, rejected, 0.0, self.features[-1].geometry)
+        return SessionResult(ranked, ev, slipped, n, rejected, 0.0, self.features[-1].geometry,
+                             unknown_prior=self.recognizer.unknown_prior)
 
 

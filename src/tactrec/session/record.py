@@ -6,12 +6,9 @@ import dataclasses
 
 import numpy as np
 
-from ..probability import fit_standard_error
+from ..probability import CONSISTENT_SE, fit_standard_error
 
 __all__ = ["TouchRecord", "CONSISTENT_SE", "allowed_fit", "fits"]
-
-#: a mean distance fits as well as a reference fit when it is within this many of its standard errors
-CONSISTENT_SE = 3.0
 
 
 def allowed_fit(fit, points):

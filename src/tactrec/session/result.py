@@ -7,7 +7,9 @@ import dataclasses
 
 import numpy as np
 
-from ..probability import AMBIGUOUS, Evidence
+import functools
+
+from ..probability import AMBIGUOUS, UNKNOWN_PRIOR, Evidence
 
 __all__ = ["Hypothesis", "SessionResult", "MASS", "LEADING"]
 
@@ -69,7 +71,8 @@ class SessionResult:
     """The recognition of a session: one object, one pose per model.
 
     ``ranking`` holds the models with a joint pose, by error over the touches not slipped;
-    ``probabilities`` are theirs (sum 1); ``slipped`` the touches no model's pose fits;
+    ``probabilities`` are theirs (with ``unknown``, the probability that the object is none of
+    them, sum 1; :mod:`tactrec.probability`); ``slipped`` the touches no model's pose fits;
     ``estimate`` the latest touch's contact, normal and curvatures in the world frame; ``stages``
     the add's ``seconds`` by part (:data:`tactrec.session.STAGES`: the touch's own search, the
     joint fits, the search with the other touches in the score).
@@ -83,16 +86,27 @@ class SessionResult:
     seconds: float
     estimate: object = None
     stages: dict = dataclasses.field(default_factory=dict)
+    unknown_prior: float = UNKNOWN_PRIOR
 
     @property
     def best(self) -> str | None:
         return self.ranking[0].model if self.ranking else None
 
+    @functools.cached_property
+    def _outcomes(self) -> tuple[dict[str, float], float]:
+        if self.evidence is None:
+            return {}, 1.0
+        p, unknown = self.evidence.outcomes(prior=self.unknown_prior)
+        return dict(zip(self.evidence.models, p.tolist())), unknown
+
     @property
     def probabilities(self) -> dict[str, float]:
-        if self.evidence is None:
-            return {}
-        return dict(zip(self.evidence.models, self.evidence.probabilities().tolist()))
+        return self._outcomes[0]
+
+    @property
+    def unknown(self) -> float:
+        """The probability that the object is none of the models (INTERFACE.md, Probabilities)."""
+        return self._outcomes[1]
 
     @property
     def confidence(self) -> float:
@@ -106,14 +120,15 @@ class SessionResult:
         return next((h for h in self.ranking if h.model == model), None)
 
     def leading(self) -> list[Hypothesis]:
-        """The most probable hypotheses, until they hold :data:`MASS` of the probability, at most
-        :data:`LEADING`: those :func:`tactrec.proposal.propose` separates."""
+        """The most probable hypotheses, until they hold :data:`MASS` of the models' probability
+        (``unknown``'s aside), at most :data:`LEADING`: those :func:`tactrec.proposal.propose` separates."""
         probs = self.probabilities
+        total = sum(probs.values())
         out, mass = [], 0.0
         for h in sorted(self.ranking, key=lambda h: -probs.get(h.model, 0.0))[:LEADING]:
             out.append(h)
             mass += probs.get(h.model, 0.0)
-            if mass >= MASS:
+            if mass >= MASS * total:
                 break
         return out
 
@@ -126,6 +141,6 @@ class SessionResult:
         out = {"best": self.best, "ranking": ranking}
         if g is not None:                                            # the latest touch, world frame
             out.update(contact=g.contact.tolist(), normal=g.normal.tolist(), curvatures=[g.k1, g.k2])
-        out.update(confidence=self.confidence, ambiguous=self.ambiguous, touches=self.touches,
+        out.update(confidence=self.confidence, unknown=self.unknown, ambiguous=self.ambiguous, touches=self.touches,
                    slipped=list(self.slipped), seconds=round(self.seconds, 4))
         return out
