@@ -133,3 +133,32 @@ def test_similar_scans_are_the_nearest_shapes():
     fills = [shape_signature(e.model)[0] for e in entries]
     assert abs(fills[0] - 1.0) < 0.01 and abs(fills[1] - np.pi / 6) < 0.05 and abs(fills[2] - np.pi / 4) < 0.02
     assert similar_scans(entries, 0, 2) == [0, 3] and similar_scans(entries, 2, 2) == [2, 4]
+
+
+def test_a_missed_line_counts_against_the_poses_it_cuts(small, tmp_path):
+    """One noisy touch on the capsule (world frame).  A line from 5 mm outside the contact inwards along
+    the normal met nothing: it cuts through the capsule's pose, which loses its probability to unknown;
+    a line from there outwards changes nothing.  A session file with a missed touch round-trips, and the
+    result's JSON counts the missed lines."""
+    from tactrec.io.session import MissedLine, SessionMiss, SessionTouch, load_session, save_session
+
+    entry = small[1]
+    touch = simulate_random_touch(entry.model, rng=instance_rng(71, 0), points=41, spacing=0.3, angle=60.0,
+                                  noise=0.02, noise_kind="gaussian", outward=False, sensor_frame=False)
+    with Recognizer(small) as recognizer:
+        session = recognizer.session()
+        before = session.add(touch)
+        h = before.hypothesis(entry.name)
+        assert before.best == entry.name and before.probabilities[entry.name] > 0.9
+        on_model = np.asarray(touch.meta["truth"]["contact"], dtype=np.float64)
+        contact = (on_model - h.translation) @ h.rotation                      # model -> world
+        normal = entry.model.planes(on_model[None])[1][0] @ h.rotation
+        away = session.add_miss(MissedLine(contact + 5.0 * normal, normal, 20.0))
+        assert away.probabilities[entry.name] == pytest.approx(before.probabilities[entry.name], abs=1e-9)
+        cut = session.add_miss(MissedLine(contact + 5.0 * normal, -normal, 20.0))
+        assert cut.missed == 2 and cut.probabilities.get(entry.name, 0.0) < 0.2 and cut.unknown > 0.5
+    path = tmp_path / "s.json"
+    save_session([SessionTouch(touch), SessionMiss(MissedLine(contact + 5.0 * normal, -normal, 20.0))], path)
+    loaded = load_session(path)
+    assert isinstance(loaded[1], SessionMiss) and np.allclose(loaded[1].line.direction, -normal)
+    assert cut.to_json()["missed"] == 2 and "unknown" in cut.to_json()

@@ -88,11 +88,16 @@ def test_a_slipped_touch_is_reported_not_averaged(small):
     assert np.all(h.per_touch[:3] < 0.05) and h.per_touch[3] > 0.2
 
 
-def test_next_proposes_a_reachable_place_every_leading_hypothesis_puts_on_the_surface(small):
+def test_next_proposes_an_approach_line_from_outside_every_hypothesis(small):
     """Ten seeded one-touch sessions on the capsule and the ring (flat and round patches alike):
-    where a proposal is made, its contact lies within the radius of the touch, every leading
-    hypothesis puts it within the tolerance of its surface, its normal is unit, its gain positive;
-    where none is made, one hypothesis holds 99% of the models' probability."""
+    where a proposal is made, its line starts outside every leading hypothesis' surface, runs along a
+    unit direction, and its expected contact lies on the line within the radius (and the standoff) of
+    the touch; its normal is unit and its gain positive; where none is made, one hypothesis holds 99%
+    of the probability (one that holds 99% of the models' but leaves unknown more gets a touch to
+    confirm it)."""
+    from tactrec.proposal import STANDOFF
+
+    models = {e.name: e.model for e in small}
     with Recognizer(small) as recognizer:
         for k in range(10):
             entry = small[1 + k % 2]
@@ -100,18 +105,23 @@ def test_next_proposes_a_reachable_place_every_leading_hypothesis_puts_on_the_su
             touch = simulate_random_touch(entry.model, rng=instance_rng(13, k), **dict(NOISY, points=21))
             session = recognizer.session()
             result = session.add(touch, sensor_to_world(touch, (Rw, tw)))
-            proposal = session.next(radius=20.0, tolerance=1.0, rng=k)
-            if proposal.contact is None:           # of the models' probability (unknown's aside)
-                assert max(result.probabilities.values()) >= 0.99 * sum(result.probabilities.values())
+            proposal = session.next(radius=20.0, rng=k)
+            if proposal.contact is None:
+                assert result.confidence >= 0.99
                 continue
+            line = proposal.approach
+            assert abs(np.linalg.norm(line.direction) - 1.0) < 1e-9 and line.length > 0
             c0 = session.features[0].geometry.contact if session.world[0].contact is None else session.world[0].contact
-            assert np.linalg.norm(proposal.contact - c0) <= 20.0
+            assert np.linalg.norm(proposal.contact - c0) <= 20.0 + 2 * STANDOFF * 20.0
+            along = (proposal.contact - line.start) @ line.direction
+            assert -1e-9 <= along <= line.length + 1e-9
+            assert np.linalg.norm(line.start + along * line.direction - proposal.contact) < 1e-6
             assert abs(np.linalg.norm(proposal.normal) - 1.0) < 1e-9 and proposal.gain > 0
-            models = {e.name: e.model for e in small}
             for name, _ in proposal.hypotheses:
                 h = result.hypothesis(name)
-                x = h.scale * proposal.contact @ h.rotation.T + h.translation
-                assert models[name].distance(x[None])[0] <= 1.0 + 1e-9
+                x = h.scale * line.start @ h.rotation.T + h.translation
+                assert models[name].planes(x[None])[0][0] > 0
+            assert set(proposal.to_json()["approach"]) == {"start", "direction", "length"}
 
 
 def test_session_files_round_trip_and_bad_ones_are_one_line(tmp_path, capsys):
@@ -460,17 +470,24 @@ def test_a_random_next_touch_is_found_within_reach_on_a_large_object():
 
 
 def test_the_bench_asks_next_again_when_its_touch_cannot_be_made(small):
-    """The bench's next touch for ``next``: a proposed place whose touch the simulation refuses (the
+    """The bench's next touch for ``next``: a proposed line whose touch the simulation refuses (the
     curves along one direction) is asked for again, as a robot whose touch failed would; the touch
-    made is at the second place; a proposal of nothing ends the session."""
+    made is where the second line meets the object; a line that meets nothing comes back as the
+    missed line; a proposal of nothing ends the session."""
     from types import SimpleNamespace
 
     from tactrec.bench.multi_touch import SPECS, _next_touch
+    from tactrec.io.session import MissedLine
 
     model = small[0].model
     frames = [model.site_frame(s) for s in model.random_sites(2, rng=np.random.default_rng(5))]
-    bad = SimpleNamespace(contact=frames[0].point, directions=np.stack([frames[0].d1, frames[0].d1]))
-    good = SimpleNamespace(contact=frames[1].point, directions=np.stack([frames[1].d1, frames[1].d2]))
+
+    def towards(frame, directions):
+        line = MissedLine(frame.point + 10.0 * frame.normal, -frame.normal, 20.0)
+        return SimpleNamespace(contact=frame.point, directions=directions, approach=line)
+
+    bad = towards(frames[0], np.stack([frames[0].d1, frames[0].d1]))
+    good = towards(frames[1], np.stack([frames[1].d1, frames[1].d2]))
     asked = []
 
     def propose(proposals):
@@ -487,6 +504,10 @@ def test_the_bench_asks_next_again_when_its_touch_cannot_be_made(small):
     assert len(asked) == 2
     world = np.concatenate(data.curves) @ R.T + t
     assert np.min(np.linalg.norm(world - frames[1].point, axis=1)) < 0.3       # the curves meet there
+    asked.clear()
+    away = MissedLine(frames[1].point + 10.0 * frames[1].normal, frames[1].normal, 20.0)
+    session.next = propose([SimpleNamespace(contact=frames[1].point, directions=good.directions, approach=away)])
+    assert _next_touch("next", session, small[0], truth, spec, np.random.default_rng(0)) is away
     asked.clear()
     session.next = propose([SimpleNamespace(contact=None, directions=None)])
     assert _next_touch("next", session, small[0], truth, spec, np.random.default_rng(0)) is None and len(asked) == 1

@@ -12,21 +12,26 @@ __all__ = ["recognize_session", "format_session", "cmd_next", "add_next_parser",
 
 #: how far from an earlier contact ``next`` may propose a touch, millimetres (converted to the session's units)
 DEFAULT_RADIUS_MM = 40.0
-#: how near every leading hypothesis must put the proposed contact to its surface, millimetres
-DEFAULT_TOLERANCE_MM = 1.0
 
 
 def recognize_session(recognizer, touches):
-    """A :class:`~tactrec.session.Session` of ``touches`` (:class:`~tactrec.io.session.SessionTouch`), all added."""
+    """A :class:`~tactrec.session.Session` of ``touches`` (:class:`~tactrec.io.session.SessionTouch`, or
+    :class:`~tactrec.io.session.SessionMiss` for a line that met nothing), all added in order."""
+    from .io.session import SessionMiss
+
     session = recognizer.session()
     for t in touches:
-        session.add(t.data, (t.rotation, t.translation))
+        if isinstance(t, SessionMiss):
+            session.add_miss(t.line, (t.rotation, t.translation))
+        else:
+            session.add(t.data, (t.rotation, t.translation))
     return session
 
 
 def format_session(name: str, result) -> str:
     """The text form of a session's result."""
     slipped = f", slipped touches {list(result.slipped)}" if result.slipped else ""
+    slipped += f", {result.missed} missed line{'s' if result.missed != 1 else ''}" if result.missed else ""
     flag = ", ambiguous" if result.ambiguous else ""
     lines = [f"{name}: {result.touches} touches, best {result.best}   (confidence {result.confidence:.3f}, "
              f"unknown {result.unknown:.3f}{flag}{slipped}; {result.seconds:.2f} s)"]
@@ -50,9 +55,8 @@ def cmd_next(args, *, open_models, options, warn) -> int:
     from .recognition import Recognizer, default_workers
 
     touches = load_session(args.session)
-    units = touches[0].data.units
+    units = next(t.data.units for t in touches if hasattr(t, "data"))
     radius = args.radius if args.radius is not None else _in_units(DEFAULT_RADIUS_MM, units)
-    tolerance = args.tolerance if args.tolerance is not None else _in_units(DEFAULT_TOLERANCE_MM, units)
     db = open_models(db=args.db, models=args.models, warn=warn, quiet=args.quiet, units=args.units, scale=args.scale)
     workers = default_workers() if len(db) > 4 else 1
     with Recognizer(db, method=args.method, workers=workers, unknown_prior=args.unknown_prior,
@@ -60,7 +64,7 @@ def cmd_next(args, *, open_models, options, warn) -> int:
         session = recognize_session(recognizer, touches)
         if not session.result.ranking:
             raise InputError("no model fits any touch of the session: nothing to propose", args.session)
-        proposal = session.next(radius=radius, tolerance=tolerance, angle=args.angle, rng=args.seed)
+        proposal = session.next(radius=radius, angle=args.angle, rng=args.seed)
     out = proposal.to_json()
     if args.json:
         sys.stdout.write(json.dumps(out) + "\n")
@@ -70,8 +74,9 @@ def cmd_next(args, *, open_models, options, warn) -> int:
         print(f"{args.session}: nothing to propose: {proposal.reason} ({hyps})")
         return 0
     fmt = lambda v: ", ".join(f"{x:.4g}" for x in v)  # noqa: E731
-    print(f"{args.session}: touch at ({fmt(proposal.contact)}), approach along -({fmt(proposal.normal)}); "
-          f"expected gain {proposal.gain:.3f} bits")
+    line = proposal.approach
+    print(f"{args.session}: approach from ({fmt(line.start)}) along ({fmt(line.direction)}) for {line.length:.4g}; "
+          f"contact expected at ({fmt(proposal.contact)}); expected gain {proposal.gain:.3f} bits")
     for i, d in enumerate(proposal.directions, start=1):
         print(f"  curve {i} along ({fmt(d)})")
     print(f"  separates: {hyps}")
@@ -86,8 +91,6 @@ def add_next_parser(sub, *, positive, mesh_options, methods, default_method) -> 
     p.add_argument("--json", action="store_true", help="the proposal as one JSON object")
     p.add_argument("--radius", type=positive, help="how far from an earlier touch's contact the proposed one may be, "
                    f"in the session's units (default {DEFAULT_RADIUS_MM:g} mm)")
-    p.add_argument("--tolerance", type=positive, help="how near its surface every leading hypothesis must put the "
-                   f"proposed contact, session units (default {DEFAULT_TOLERANCE_MM:g} mm)")
     p.add_argument("--angle", type=positive, default=60.0, help="degrees between the proposed curves (default 60)")
     p.add_argument("--method", choices=sorted(methods), default=default_method,
                    help=f"registration method (default {default_method})")

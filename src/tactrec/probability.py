@@ -45,7 +45,8 @@ keeps that much of the edge's likelihood, so that a touch whose search did
 not settle is never sure either way.  In a session every kept touch is
 evidence, each counted at the excess of the touch the model's joint pose
 fits worst: the pose must fit each of them, and each touch it fits makes
-unknown less likely.
+unknown less likely.  A line the sensor followed without meeting anything
+must not cut into the surface (:mod:`tactrec.session.lines`).
 
 Nothing comes from a simulation setting: the scatter is the touch's own.
 Models the search rejected or deferred have no probability; the accepted
@@ -183,6 +184,10 @@ class Evidence:
         a closed world (no ``unknown``: the probabilities compare the models only).
     touches : tuple of int
         Curves per touch, in order (empty: all the curves are one touch).
+    misses : (k, q) float or None
+        Per model, the excess of each of ``q`` lines the sensor followed without meeting anything
+        (:mod:`tactrec.session.lines`: how far the line cuts into its surface under its pose, in
+        the fit test's units; 0 where it stays outside).
     """
 
     models: tuple
@@ -192,6 +197,7 @@ class Evidence:
     noise: float = 0.0
     limits: tuple = ()
     touches: tuple = ()
+    misses: np.ndarray | None = None
 
     @property
     def block(self) -> int:
@@ -212,7 +218,8 @@ class Evidence:
 
     def excess(self) -> np.ndarray:
         """Per model ``(k,)``: by how many standard errors (:func:`fit_spread`) its pose's mean distance
-        exceeds the fit limit on the touch it fits worst (negative within the noise)."""
+        exceeds the fit limit on the touch it fits worst (negative within the noise), or a missed
+        line's excess where that is larger."""
         k = len(self.models)
         if not self.limits or k == 0:
             return np.full(k, -np.inf)
@@ -223,7 +230,10 @@ class Evidence:
             mean = self.distances[:, bounds[j]:bounds[j + 1]].sum(axis=1) / max(int(m), 1)   # no BLAS
             spread = fit_spread(limit, m)
             z[:, j] = (mean - limit) / spread if spread > 0 else np.where(mean > limit, np.inf, -np.inf)
-        return z.max(axis=1)
+        worst = z.max(axis=1)
+        if self.misses is not None and np.size(self.misses):
+            worst = np.maximum(worst, np.asarray(self.misses, dtype=np.float64).max(axis=1))
+        return worst
 
     def outcomes(self, *, prior: float = UNKNOWN_PRIOR, miss: float = SEARCH_MISS, replicates: int = REPLICATES,
                  rng=SEED) -> tuple[np.ndarray, float]:
@@ -243,14 +253,17 @@ class Evidence:
         out = {"models": list(self.models), "distances": np.round(self.distances, 7).tolist(),
                "curve_sizes": list(self.curve_sizes), "rho": self.rho, "noise": self.noise,
                "limits": [float(x) for x in self.limits], "touches": list(self.touches)}
+        if self.misses is not None:
+            out["misses"] = np.asarray(self.misses, dtype=np.float64).tolist()
         return out
 
     @classmethod
     def from_json(cls, d: dict) -> "Evidence":
         k = len(d["models"])
+        misses = None if d.get("misses") is None else np.asarray(d["misses"], dtype=np.float64).reshape(k, -1)
         return cls(tuple(d["models"]), np.asarray(d["distances"], dtype=np.float64).reshape(k, -1),
                    tuple(int(n) for n in d["curve_sizes"]), float(d["rho"]), float(d.get("noise", 0.0)),
-                   tuple(float(x) for x in d.get("limits", ())), tuple(int(n) for n in d.get("touches", ())))
+                   tuple(float(x) for x in d.get("limits", ())), tuple(int(n) for n in d.get("touches", ())), misses)
 
 
 def _lag_one(res: Sequence[np.ndarray]) -> float:
@@ -267,15 +280,16 @@ def _lag_one(res: Sequence[np.ndarray]) -> float:
 
 
 def evidence(models: Sequence[str], signed: Sequence[np.ndarray], curve_sizes: Sequence[int],
-             noise: float = 0.0, *, limits: Sequence[float] = (), touches: Sequence[int] = ()) -> Evidence:
+             noise: float = 0.0, *, limits: Sequence[float] = (), touches: Sequence[int] = (),
+             misses=None) -> Evidence:
     """The :class:`Evidence` from each accepted model's signed residuals ``(m,)`` (best model first;
-    curves in order, ``curve_sizes`` points each; ``limits`` and ``touches`` as there)."""
+    curves in order, ``curve_sizes`` points each; ``limits``, ``touches`` and ``misses`` as there)."""
     sizes = tuple(int(n) for n in curve_sizes)
     m = sum(sizes)
     rows = [np.abs(np.asarray(r, dtype=np.float64)) for r in signed]
     rho = _lag_one(np.split(np.asarray(signed[0], dtype=np.float64), np.cumsum(sizes)[:-1])) if rows else 0.0
     return Evidence(tuple(models), np.array(rows).reshape(len(rows), m), sizes, float(rho), float(noise),
-                    tuple(float(x) for x in limits), tuple(int(n) for n in touches))
+                    tuple(float(x) for x in limits), tuple(int(n) for n in touches), misses)
 
 
 def _draws(curve_sizes: Sequence[int], block: int, replicates: int, rng) -> np.ndarray:

@@ -10,17 +10,25 @@ proposal lists the hypotheses it separates.
 
 Candidates.  Places on the leading hypotheses' surfaces within ``radius`` of
 an earlier touch's contact (``candidates`` random sites of each model in that
-reach, carried into the world by its pose) that every leading hypothesis puts
-on the object's surface (within ``tolerance`` of its model, under its pose)
-and whose surface, under one of its poses, takes the whole touch:
-places the sensor can reach and every hypothesis agrees it will meet and can
-trace.  A pose under which the touch would leave the surface is not a truth
-for that place.
+reach, carried into the world by its pose).  At each, the sensor is sent
+along an *approach line*: from :data:`STANDOFF` x ``radius`` outside the
+place along its outward normal, inwards, twice that far (a line that starts
+inside some hypothesis' surface is no candidate).  Under every pose of every
+leading hypothesis the line's outcome is predicted: where it first meets the
+surface (:func:`tactrec.session.lines.first_hit`), and there the touch the
+sensor would record, or that it meets nothing.  The place need not lie on
+every hypothesis' surface: a line that one hypothesis says meets the surface
+8 mm before another does separates them best.  A pose whose surface meets
+the line but will not take the whole touch there is not a truth for that
+line.
 
-Gain.  At a candidate, each hypothesis predicts the touch the sensor would
-record: three curves through the place, in the same world directions, as the
-session's touches are (their points per curve and spacing), noise-free.  If
-hypothesis ``i`` is true and model ``M`` is fitted, ``M``'s pose is refitted
+Gain.  At a candidate, each pose predicts the outcome: three curves through
+where the line meets its surface, in the same world directions, as the
+session's touches are (their points per curve and spacing), noise-free, or
+no contact.  If a pose that meets nothing is true, a model is weighed by its
+pose the line cuts least (:func:`tactrec.session.lines.cut_depth`, in the
+fit test's units as for a missed line, :mod:`tactrec.session.lines`).  If
+hypothesis ``i`` is true, meets the line and model ``M`` is fitted, ``M``'s pose is refitted
 to the earlier touches and ``i``'s predicted touch together, from each of
 its poses: a pose the earlier touches leave free, along a cylinder or over
 a flat patch, slides to absorb what it can.  The refit is one Gauss-Newton
@@ -37,6 +45,13 @@ touches' own, or the best joint fit's if that is larger.  After the touch,
 model ``M``'s probability is weighted by ``exp(-z_iM^2 / 2)``, the true
 model's by 1.  The expected gain is the entropy of the models' probabilities
 now less its expectation over the truths after the touch, in bits.
+``unknown`` is left out of the gain: what an object not in the database
+would show along the line cannot be predicted.  But with one hypothesis left
+and ``unknown`` holding more than ``1 - MASS``, a touch that its pose
+predicts is proposed to confirm it (each touch a pose fits makes unknown
+less likely, :mod:`tactrec.probability`): the line of a place on its surface
+farthest from the earlier contacts, its gain the entropy between the model
+and unknown (what the touch can settle).
 
 Choice.  The gain saturates: after one touch, most places that qualify
 separate the leading hypotheses at their poses completely, and their gains
@@ -55,11 +70,17 @@ import dataclasses
 import numpy as np
 from scipy.special import erf
 
+from .io.session import MissedLine
+from .probability import CONSISTENT_SE
 from .registration.solver import jacobian
+from .session.lines import cut_depth, first_hit
 from .session.result import LEADING, MASS
 from .simulation import simulate_world_touch
 
-__all__ = ["Proposal", "propose", "MASS", "LEADING"]
+__all__ = ["Proposal", "propose", "MASS", "LEADING", "STANDOFF"]
+
+#: an approach line starts this fraction of ``radius`` outside its place and runs twice as far
+STANDOFF = 0.5
 
 
 @dataclasses.dataclass(frozen=True)
@@ -80,6 +101,9 @@ class Proposal:
         some place suits) and their probabilities.
     reason : str
         Why nothing is proposed, when nothing is.
+    approach : MissedLine or None
+        The line the sensor follows until it meets the object (``start``, ``direction``,
+        ``length``), world frame.
     """
 
     contact: np.ndarray | None
@@ -88,6 +112,7 @@ class Proposal:
     gain: float
     hypotheses: list
     reason: str = ""
+    approach: MissedLine | None = None
 
     def to_json(self) -> dict:
         out = {"hypotheses": [{"model": m, "probability": float(p)} for m, p in self.hypotheses]}
@@ -96,6 +121,8 @@ class Proposal:
             return out
         out.update(contact=self.contact.tolist(), normal=self.normal.tolist(), directions=self.directions.tolist(),
                    gain=float(self.gain))
+        if self.approach is not None:
+            out["approach"] = self.approach.to_json()
         return out
 
 
@@ -205,16 +232,13 @@ def _separation(model, h, H0: np.ndarray, predicted: np.ndarray, sigma: float, e
     return excess / (spread * np.sqrt(2.0 * total))
 
 
-def propose(session, *, radius: float, tolerance: float = 1.0, angle: float = 60.0, candidates: int = 48,
-            rng=None) -> Proposal:
+def propose(session, *, radius: float, angle: float = 60.0, candidates: int = 48, rng=None) -> Proposal:
     """The next touch for ``session`` (a :class:`~tactrec.session.Session` with at least one touch).
 
     Parameters
     ----------
     radius : float
-        World units: a proposed contact lies within this distance of an earlier touch's contact.
-    tolerance : float
-        World units: how near to its surface every leading hypothesis must put the proposed contact.
+        World units: a proposed place lies within this distance of an earlier touch's contact.
     angle : float
         Degrees between the proposed curves' directions.
     candidates : int
@@ -229,21 +253,42 @@ def propose(session, *, radius: float, tolerance: float = 1.0, angle: float = 60
     leading = result.leading()
     hyps = [(h.model, probs.get(h.model, 0.0)) for h in leading]
     if len(leading) < 2:
-        return Proposal(None, None, None, 0.0, hyps, "one hypothesis holds the probability: nothing to separate")
+        if result.unknown <= 1.0 - MASS:
+            return Proposal(None, None, None, 0.0, hyps, "one hypothesis holds the probability: nothing to separate")
+        # one model against unknown: a touch its pose predicts, as far from the others as reach allows
+        confirm = _best_line(session, leading, np.ones(1), radius=radius, angle=angle, candidates=candidates,
+                             rng=rng)
+        if confirm is None:
+            return Proposal(None, None, None, 0.0, hyps, f"no approach line within {radius:g} of the touches that "
+                            f"{leading[0].model} takes")
+        _, contact, normal, directions, line = confirm
+        gain = _entropy(np.array([result.confidence, result.unknown]))
+        return Proposal(contact, normal, directions, gain, hyps, approach=line)
     for n in range(len(leading), 1, -1):
-        # the most probable hypotheses that some reachable place suits
-        best = _best_place(session, leading[:n], np.array([w for _, w in hyps[:n]]), radius=radius,
-                           tolerance=tolerance, angle=angle, candidates=candidates, rng=rng)
+        # the most probable hypotheses that some reachable line suits
+        best = _best_line(session, leading[:n], np.array([w for _, w in hyps[:n]]), radius=radius, angle=angle,
+                          candidates=candidates, rng=rng)
         if best is not None:
-            return Proposal(best[1], best[2], best[3], best[0], hyps[:n])
-    return Proposal(None, None, None, 0.0, hyps, f"no place within {radius:g} of the touches that the two leading "
-                    f"hypotheses both put on the surface (tolerance {tolerance:g})")
+            gain, contact, normal, directions, line = best
+            return Proposal(contact, normal, directions, gain, hyps[:n], approach=line)
+    return Proposal(None, None, None, 0.0, hyps, f"no approach line within {radius:g} of the touches whose outcome "
+                    "the two leading hypotheses both predict")
 
 
-def _best_place(session, leading: list, weights: np.ndarray, *, radius: float, tolerance: float, angle: float,
-                candidates: int, rng):
-    """The candidate of largest expected gain among ``leading`` hypotheses (probabilities ``weights``):
-    ``(gain, contact, normal, directions)``, or None where no place qualifies."""
+def _outcome(model, pose, line, directions, *, step: float, points: int, spacing: float):
+    """What ``line`` gives under ``pose``: ``("miss", None)``, ``("hit", points (k, 3))`` (the touch
+    predicted where it meets the surface), or ``(None, None)`` where the surface there will not take
+    the touch."""
+    hit = first_hit(model, pose, line, step)
+    if hit is None:
+        return "miss", None
+    x = _predicted(model, pose, hit, directions, points=points, spacing=spacing)
+    return ("hit", x) if x is not None else (None, None)
+
+
+def _best_line(session, leading: list, weights: np.ndarray, *, radius: float, angle: float, candidates: int, rng):
+    """The approach line of largest expected gain among ``leading`` hypotheses (probabilities
+    ``weights``): ``(gain, contact, normal, directions, line)``, or None where no line qualifies."""
     result = session.result
     models = {e.name: e.model for e in session.recognizer.models}
     weights = weights / weights.sum()
@@ -268,41 +313,60 @@ def _best_place(session, leading: list, weights: np.ndarray, *, radius: float, t
     spacing = float(np.median([w.spacing for w in session.world]))
     noise = float(np.median([f.noise for f in session.features]))
     sigma = max(noise, leading[0].error * np.sqrt(np.pi / 2), 1e-3 * spacing)
+    limit = session.limit(use)
+    standoff = STANDOFF * radius
     entropy = _entropy(weights)
     found = []
     for h in leading:
         model = models[h.model]
         for frame, c in _reachable(model, h, contacts, radius, candidates, rng):
-            if not all(models[m.model].distance(_to_model(m, c)[None])[0] / m.scale <= tolerance for m in leading):
-                continue
             normal = frame.normal @ h.rotation                                        # model -> world direction
+            normal = normal / np.linalg.norm(normal)
+            line = MissedLine(c + standoff * normal, -normal, 2.0 * standoff)
+            if any(models[g.model].planes(_to_model(g, line.start)[None])[0][0] <= 0.0 for g in poses):
+                continue                                                  # starts inside some pose's surface
             start = rng.uniform(0.0, 2 * np.pi)
             t1 = frame.d1 @ h.rotation
             t2 = frame.d2 @ h.rotation
             angles = start + np.deg2rad(angle) * np.arange(3)
             directions = np.cos(angles)[:, None] * t1 + np.sin(angles)[:, None] * t2
-            predicted = [_predicted(models[g.model], g, c, directions, points=points, spacing=spacing) for g in poses]
-            takes = np.array([x is not None for x in predicted])
-            if not np.all(by_model[takes].any(axis=0)):   # every model has a pose whose surface takes the touch
+            outcomes = [_outcome(models[g.model], g, line, directions, step=spacing, points=points, spacing=spacing)
+                        for g in poses]
+            kinds = np.array([o[0] for o in outcomes], dtype=object)
+            takes = kinds != None  # noqa: E711
+            if not np.all(by_model[takes].any(axis=0)):   # every model has a pose that predicts the outcome
                 continue
-            # the truths: the poses that take it, each model keeping its probability
+            hits = kinds == "hit"
+            # the truths: the poses with an outcome, each model keeping its probability
             truth = p * takes / (by_model @ (by_model[takes].sum(axis=0) / by_model.sum(axis=0)))
-            stacked = np.array([x if x is not None else predicted[np.argmax(takes)] for x in predicted])
             z = np.zeros((len(poses), len(leading)))                    # (truth pose, model fitted)
-            for k in range(len(leading)):
-                others = (owner != k) & takes
-                z[others, k] = np.min([_separation(models[poses[j].model], poses[j], info[j], stacked[others],
-                                                   sigma, len(x_world)) for j in np.nonzero(owner == k)[0]], axis=0)
+            missing = (kinds == "miss")
+            if missing.any():                # a truth that meets nothing: each model by its pose the line cuts least
+                cut = np.array([CONSISTENT_SE * cut_depth(models[g.model], g, line, spacing) / max(limit, 1e-300)
+                                for g in poses])
+                for k in range(len(leading)):
+                    z[missing & (owner != k), k] = cut[owner == k].min()
+            if hits.any():
+                stacked = np.array([o[1] for o, hit in zip(outcomes, hits) if hit])
+                for k in range(len(leading)):
+                    others = (owner != k)[hits]
+                    if not others.any():
+                        continue
+                    sep = np.min([_separation(models[poses[j].model], poses[j], info[j], stacked[others], sigma,
+                                              len(x_world)) for j in np.nonzero(owner == k)[0]], axis=0)
+                    z[np.nonzero(hits)[0][others], k] = sep
             with np.errstate(under="ignore"):
                 after = weights[None, :] * np.exp(-0.5 * np.minimum(z * z, 1400.0))
                 after = after / after.sum(axis=1, keepdims=True)
             gain = entropy - float(sum(truth[i] * _entropy(after[i]) for i in np.nonzero(takes)[0]))
-            found.append((gain, c, normal / np.linalg.norm(normal), directions))
+            best = int(np.argmax(p))                                     # the most probable pose's contact
+            contact = first_hit(models[poses[best].model], poses[best], line, spacing)
+            found.append((gain, c if contact is None else contact, normal, directions, line))
     return _chosen(found, contacts, entropy)
 
 
 def _chosen(found: list, contacts: np.ndarray, entropy: float):
-    """The place proposed among ``found``, ``(gain, contact (3,), normal, directions)`` each: of those
+    """The line proposed among ``found``, ``(gain, contact (3,), normal, directions, line)`` each: of those
     whose gain lies within :data:`TIE` x ``entropy`` (bits) of the largest, the one farthest from
     every earlier contact (world ``contacts (N, 3)``), the larger gain on a tie; None for none."""
     if not found:

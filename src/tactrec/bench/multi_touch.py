@@ -10,8 +10,10 @@ after it two sessions go on from the same first touch:
     a random place on the true object within ``radius`` of an earlier
     contact (random directions, the protocol's angle);
 ``next``
-    the place and directions :meth:`tactrec.session.Session.next` proposes,
-    simulated on the true object there.
+    the approach line and directions :meth:`tactrec.session.Session.next`
+    proposes: the touch is simulated where the line first meets the true
+    object, and a line that meets nothing is added as a missed touch
+    (:meth:`tactrec.session.Session.add_miss`).
 
 A ``next`` session stops when nothing is left to separate (one hypothesis
 holds 99% of the probability); its later counts keep its last answer.  Sets:
@@ -65,7 +67,10 @@ import numpy as np
 
 from ..features import Touch
 from ..io.atomic import write_text_atomic
+from ..io.session import MissedLine
 from ..session.fit import per_touch
+from ..session.lines import first_hit
+from ..session.result import Hypothesis
 from ..simulation import random_rigid_motion, sensor_to_world, simulate_world_touch
 from ..surfaces import BUILTIN_SETS
 from . import multi_touch_report as report
@@ -150,7 +155,8 @@ def _first(kind: str, m_index: int, instance: int, seed: int):
 
 
 def _next_touch(strategy, session, entry, world2model, spec, rng):
-    """The next touch's data and ``sensor2world`` pose, or None (nothing to propose / no place).  A place
+    """The next touch's data and ``sensor2world`` pose, the approach line where ``next``'s met nothing on
+    the true object, or None (nothing to propose / no place).  A place
     whose simulated touch the estimator rejects (curves tangent at the contact, say) is no place: a
     random one is drawn again, and ``next`` is asked again, as a robot whose touch failed would."""
     points = int(round(spec["length"] / SPACING)) + 1
@@ -163,7 +169,12 @@ def _next_touch(strategy, session, entry, world2model, spec, rng):
             proposal = session.next(radius=RADIUS, angle=spec["angle"], rng=rng)
             if proposal.contact is None:
                 return None
-            contact, directions = proposal.contact, proposal.directions
+            # the sensor follows the approach line on the true object: it meets it there, or nothing
+            truth = Hypothesis("truth", R, t, world2model[2], 0.0, np.zeros(0), ())
+            hit = first_hit(entry.model, truth, proposal.approach, SPACING)
+            if hit is None:
+                return proposal.approach
+            contact, directions = hit, proposal.directions
         else:
             # a random place within reach: sites are drawn until one is (on a large object few are)
             while True:
@@ -229,13 +240,17 @@ def _run_session(task, recognizer_, entry, first) -> dict:
     touch, pose = first, sensor_to_world(first, (Rw, tw))
     while True:
         start = time.perf_counter()
-        result = session.add(touch, pose)
+        if isinstance(touch, MissedLine):            # the approach line met nothing: evidence too
+            result = session.add_miss(touch)
+        else:
+            result = session.add(touch, pose)
         seconds = time.perf_counter() - start
         steps.append({"best": result.best, "correct": result.best == entry.name,
                       "confidence": result.confidence, "unknown": result.unknown, "seconds": seconds,
                       "slipped": list(result.slipped),
                       "evidence": None if result.evidence is None else result.evidence.to_json(),
-                      "own_seconds": session.records[-1].own.seconds, "stages": dict(result.stages),
+                      "own_seconds": None if isinstance(touch, MissedLine) else session.records[-1].own.seconds,
+                      "missed": isinstance(touch, MissedLine), "stages": dict(result.stages),
                       "truth": _truth(session, entry, world2model)})
         if len(steps) >= TOUCHES:
             break
@@ -244,7 +259,7 @@ def _run_session(task, recognizer_, entry, first) -> dict:
         steps[-1]["propose_seconds"] = time.perf_counter() - start
         if found is None:
             break
-        touch, pose = found
+        touch, pose = (found, None) if isinstance(found, MissedLine) else found
     return {"set": kind, "model": entry.name, "instance": instance, strategy: steps}
 
 

@@ -4,7 +4,9 @@ A session is JSON with ``touches``, each a tactile data object (``curves``,
 optional ``contact``, ``outward``, ``units``) in its sensor's frame, with an
 optional ``sensor2world`` pose (``world = R @ sensor + t``; without it the
 points are already in the world frame).  ``units`` may sit on the session.
-A plain tactile data file is a session of one touch.  Everything is
+A plain tactile data file is a session of one touch.  A touch whose approach
+line met nothing has no curves and ``"missed": {"start", "direction",
+"length"}`` (sensor frame; :class:`SessionMiss`).  Everything is
 validated here and a problem is one :class:`~tactrec.errors.InputError`
 naming the file, and the touch, and what is wrong.
 """
@@ -24,7 +26,8 @@ from .atomic import write_text_atomic
 from .meeting import check_meeting
 from .touch import TactileData, _parse_json, _read_text, _vector, load_touch
 
-__all__ = ["SessionTouch", "load_session", "save_session", "is_session_file", "rigid_pose"]
+__all__ = ["SessionTouch", "SessionMiss", "MissedLine", "load_session", "save_session", "is_session_file",
+           "rigid_pose"]
 
 
 def rigid_pose(rotation, translation, source: str, what: str = "sensor2world") -> tuple[np.ndarray, np.ndarray]:
@@ -67,6 +70,65 @@ class SessionTouch:
         return out
 
 
+@dataclasses.dataclass(frozen=True)
+class MissedLine:
+    """A line the sensor followed from ``start`` along ``direction`` (unit) for ``length`` without
+    meeting anything (INTERFACE.md, Where to touch next)."""
+
+    start: np.ndarray
+    direction: np.ndarray
+    length: float
+
+    @classmethod
+    def parse(cls, obj, source: str) -> "MissedLine":
+        """From ``{"start": [x, y, z], "direction": [x, y, z], "length": L}``, validated."""
+        if not isinstance(obj, dict) or set(obj) != {"start", "direction", "length"}:
+            raise InputError("'missed' must be an object with 'start', 'direction' and 'length'", source)
+        start = _vector(obj["start"], "missed start", source)
+        direction = _vector(obj["direction"], "missed direction", source)
+        norm = float(np.linalg.norm(direction))
+        if norm <= 1e-12:
+            raise InputError("'missed' direction has no length", source)
+        length = obj["length"]
+        if isinstance(length, bool) or not isinstance(length, (int, float)) or not np.isfinite(length) or length <= 0:
+            raise InputError(f"'missed' length must be a positive number (got {length!r})", source)
+        return cls(start, direction / norm, float(length))
+
+    def transformed(self, rotation: np.ndarray, translation: np.ndarray) -> "MissedLine":
+        """The line under ``x -> rotation @ x + translation``."""
+        return MissedLine(rotation @ self.start + translation, rotation @ self.direction, self.length)
+
+    def points(self, step: float) -> np.ndarray:
+        """Points along the line ``(n, 3)``, at most ``step`` apart (both ends included; at most
+        20,001)."""
+        n = int(min(max(np.ceil(self.length / step), 1), 20_000)) + 1
+        return self.start + np.linspace(0.0, self.length, n)[:, None] * self.direction
+
+    def to_json(self) -> dict:
+        return {"start": self.start.tolist(), "direction": self.direction.tolist(), "length": self.length}
+
+
+@dataclasses.dataclass(frozen=True)
+class SessionMiss:
+    """A touch of a session that met nothing: its line in the sensor's frame, the sensor's pose in
+    the world (as :class:`SessionTouch`) and the units."""
+
+    line: MissedLine
+    rotation: np.ndarray = dataclasses.field(default_factory=lambda: np.eye(3))
+    translation: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(3))
+    units: str | None = None
+
+    def in_world(self) -> MissedLine:
+        return self.line.transformed(self.rotation, self.translation)
+
+    def to_json(self) -> dict:
+        out = {"curves": [], "missed": self.line.to_json(),
+               "sensor2world": {"rotation": self.rotation.tolist(), "translation": self.translation.tolist()}}
+        if self.units is not None:
+            out["units"] = self.units
+        return out
+
+
 def is_session_file(path: str | os.PathLike) -> bool:
     """Whether ``path`` is a JSON object with ``touches`` (read only as far as needed to say)."""
     path = Path(path)
@@ -79,8 +141,10 @@ def is_session_file(path: str | os.PathLike) -> bool:
     return isinstance(obj, dict) and "touches" in obj
 
 
-def load_session(path: str | os.PathLike) -> list[SessionTouch]:
-    """The touches of a session file (or of a plain tactile data file: one touch, world frame)."""
+def load_session(path: str | os.PathLike) -> list:
+    """The touches of a session file (or of a plain tactile data file: one touch, world frame):
+    :class:`SessionTouch` each, or :class:`SessionMiss` for a line that met nothing.  At least one
+    touch must have met the object."""
     path = Path(path)
     if not is_session_file(path):
         return [SessionTouch(load_touch(path))]
@@ -99,24 +163,37 @@ def load_session(path: str | os.PathLike) -> list[SessionTouch]:
         item = {k: v for k, v in item.items() if k != "sensor2world"}
         if units is not None and "units" not in item:
             item["units"] = units
+        if pose is None:
+            R, t = np.eye(3), np.zeros(3)
+        elif not isinstance(pose, dict) or set(pose) != {"rotation", "translation"}:
+            raise InputError("'sensor2world' must be an object with 'rotation' and 'translation'", source)
+        else:
+            R, t = rigid_pose(pose["rotation"], pose["translation"], source)
+        if "missed" in item:
+            if item.get("curves"):
+                raise InputError("a touch that 'missed' has no curves", source)
+            unknown = set(item) - {"missed", "curves", "units"}
+            if unknown:
+                raise InputError(f"a touch that 'missed' has only 'missed' and 'units' (not {sorted(unknown)[0]!r})",
+                                 source)
+            out.append(SessionMiss(MissedLine.parse(item["missed"], source), R, t, item.get("units")))
+            continue
         data = _parse_json(json.dumps(item), source)
         check_meeting(data)
-        if pose is None:
-            out.append(SessionTouch(data))
-            continue
-        if not isinstance(pose, dict) or set(pose) != {"rotation", "translation"}:
-            raise InputError("'sensor2world' must be an object with 'rotation' and 'translation'", source)
-        R, t = rigid_pose(pose["rotation"], pose["translation"], source)
         out.append(SessionTouch(data, R, t))
-    kinds = {t.data.units for t in out}
+    if not any(isinstance(t, SessionTouch) for t in out):
+        raise InputError("no touch of the session met the object (every one 'missed')", path)
+    # a missed line without units is in the touches' units
+    kinds = {t.data.units for t in out if isinstance(t, SessionTouch)}
+    kinds |= {t.units for t in out if isinstance(t, SessionMiss) and t.units is not None}
     if len(kinds) > 1:
         raise InputError(f"the touches are in different units ({', '.join(sorted(map(str, kinds)))})", path)
     return out
 
 
-def save_session(touches: Sequence[SessionTouch], path: str | os.PathLike) -> None:
-    """Write a session file atomically."""
-    units = {t.data.units for t in touches}
+def save_session(touches: Sequence, path: str | os.PathLike) -> None:
+    """Write a session file atomically (:class:`SessionTouch` and :class:`SessionMiss` items)."""
+    units = {t.data.units if isinstance(t, SessionTouch) else t.units for t in touches}
     obj: dict = {}
     if len(units) == 1 and None not in units:
         obj["units"] = units.pop()

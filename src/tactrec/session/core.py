@@ -60,7 +60,9 @@ refinement (more searches only in step 5):
    work has no budget, and one that scores no other touches' points (the
    paper's) searches no more than step 1;
 6. the probabilities (:mod:`tactrec.probability`) come from every model's
-   distances to the points of all touches kept, under its joint pose.
+   distances to the points of all touches kept, under its joint pose, and
+   from the lines the sensor followed without meeting anything
+   (:meth:`Session.add_miss`, :mod:`.lines`).
 """
 
 from __future__ import annotations
@@ -78,6 +80,7 @@ from ..probability import evidence, fit_limit, residuals
 from ..recognition import FLOOR
 from . import family as _family
 from .fit import fit_stage
+from .lines import miss_excess
 from .record import TouchRecord, allowed_fit, fits
 from .result import Hypothesis, SessionResult
 
@@ -116,6 +119,7 @@ class Session:
         self.search_budget = search_budget
         self.recognizer = recognizer
         self.records: list[TouchRecord] = []
+        self.misses: list = []                 # lines that met nothing, world frame
         self.searches: list = []               # this add's recognitions: where new candidate poses come from
         self._joint: dict[str, Hypothesis] = {}
         self._fits: dict[bytes, dict[str, Hypothesis]] = {}   # this add's fits, per set of touches used
@@ -156,6 +160,40 @@ class Session:
             self._search_jointly(slipped, own.work)
         self.result = dataclasses.replace(self.result, seconds=time.perf_counter() - start, stages=self._stages)
         return self.result
+
+    def add_miss(self, line, sensor2world=None) -> SessionResult | None:
+        """Add a touch whose approach ``line`` (:class:`~tactrec.io.session.MissedLine`, sensor frame;
+        ``sensor2world`` as for :meth:`add`) met nothing: evidence against every pose whose surface
+        it cuts (:mod:`.lines`).  The result (None before any touch met the object) is the last one's
+        with the probabilities weighed again; nothing is searched."""
+        start = time.perf_counter()
+        if sensor2world is not None:
+            line = line.transformed(*rigid_pose(*sensor2world, "missed line"))
+        self.misses.append(line)
+        if self.result is None:
+            return None
+        kept = self.kept()
+        self.result = dataclasses.replace(self.result, evidence=self._evidence(self.result.ranking, kept),
+                                          missed=len(self.misses), seconds=time.perf_counter() - start,
+                                          stages=dict.fromkeys(STAGES, 0.0))
+        return self.result
+
+    def _evidence(self, ranked, keep):
+        """The :class:`~tactrec.probability.Evidence` of the hypotheses ``ranked`` over the touches
+        ``keep`` (indices) and the missed lines (None without a hypothesis or a touch)."""
+        if not ranked or not keep:
+            return None
+        by_name = {e.name: e.model for e in self.recognizer.models}
+        x = np.concatenate([self.records[i].points for i in keep])
+        curves = [len(c) for i in keep for c in self.features[i].curves]
+        signed = [residuals(by_name[h.model], h.rotation, h.translation, x, h.scale) for h in ranked]
+        misses = None
+        if self.misses:
+            step = 0.5 * float(np.median([self.records[i].world.spacing for i in keep]))
+            misses = miss_excess(by_name, ranked, self.misses, step=step, limit=self.limit(keep))
+        return evidence([h.model for h in ranked], signed, curves, float(np.median([f.noise for f in self.features])),
+                        limits=[fit_limit(self.features[i], self.floor) for i in keep],
+                        touches=[len(self.features[i].curves) for i in keep], misses=misses)
 
     def _timed(self, stage: str, fn, *args, **kwargs):
         """``fn(*args, **kwargs)``, its seconds added to this add's ``stage`` (:data:`STAGES`)."""
@@ -262,11 +300,11 @@ class Session:
                 out.append(r.model)
         return out
 
-    def next(self, *, radius: float, tolerance: float = 1.0, angle: float = 60.0, candidates: int = 48, rng=None):
-        """Where to touch next (:func:`tactrec.proposal.propose`)."""
+    def next(self, *, radius: float, angle: float = 60.0, candidates: int = 48, rng=None):
+        """Where to touch next: an approach line and the curves to trace (:func:`tactrec.proposal.propose`)."""
         from ..proposal import propose
 
-        return propose(self, radius=radius, tolerance=tolerance, angle=angle, candidates=candidates, rng=rng)
+        return propose(self, radius=radius, angle=angle, candidates=candidates, rng=rng)
 
     # -- the joint fit --------------------------------------------------------------------------
 
@@ -354,18 +392,10 @@ class Session:
             use = np.isin(np.arange(n), keep)
             found = self._fit_models(use, fresh)
         self._joint = found
-        by_name = {e.name: e for e in self.recognizer.models}
         ranked = sorted(found.values(), key=lambda h: (h.error, h.model))
-        ev = None
-        if ranked and keep:
-            x = np.concatenate([self.records[i].points for i in keep])
-            curves = [len(c) for i in keep for c in self.features[i].curves]
-            signed = [residuals(by_name[h.model].model, h.rotation, h.translation, x, h.scale) for h in ranked]
-            ev = evidence([h.model for h in ranked], signed, curves, float(np.median([f.noise for f in self.features])),
-                          limits=[fit_limit(self.features[i], self.floor) for i in keep],
-                          touches=[len(self.features[i].curves) for i in keep])
         rejected = {e.name: "no pose from any touch" for e in self.recognizer.models if e.name not in found}
-        return SessionResult(ranked, ev, slipped, n, rejected, 0.0, self.features[-1].geometry,
-                             unknown_prior=self.recognizer.unknown_prior)
+        return SessionResult(ranked, self._evidence(ranked, keep), slipped, n, rejected, 0.0,
+                             self.features[-1].geometry, unknown_prior=self.recognizer.unknown_prior,
+                             missed=len(self.misses))
 
 
