@@ -300,11 +300,12 @@ class Session:
                 out.append(r.model)
         return out
 
-    def next(self, *, radius: float, angle: float = 60.0, candidates: int = 48, rng=None):
-        """Where to touch next: an approach line and the curves to trace (:func:`tactrec.proposal.propose`)."""
-        from ..proposal import propose
+    def next(self, *, radius: float, angle: float = 60.0, candidates: int | None = None, rng=None):
+        """Where to touch next: an approach line and the curves to trace (:func:`tactrec.proposal.propose`;
+        ``candidates`` None: its :data:`~tactrec.proposal.CANDIDATES`)."""
+        from ..proposal import CANDIDATES, propose
 
-        return propose(self, radius=radius, angle=angle, candidates=candidates, rng=rng)
+        return propose(self, radius=radius, angle=angle, candidates=candidates or CANDIDATES, rng=rng)
 
     # -- the joint fit --------------------------------------------------------------------------
 
