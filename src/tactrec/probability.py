@@ -83,7 +83,7 @@ SEARCH_MISS = 0.1
 CONSISTENT_SE = 3.0
 #: the relative variance of the noise estimate (:func:`tactrec.estimation.noise_level`, the median over
 #: three curves) times the points it is taken over, for white Gaussian noise: 1.14, 1.10, 1.04 and 1.01
-#: on 21, 41, 81 and 161 points a curve (4,000 draws each; ``tests/test_probability.py`` checks it)
+#: on 21, 41, 81 and 161 points a curve (4,000 draws each; ``tests/test_open_world.py`` checks it)
 NOISE_VARIANCE = 1.1
 
 
@@ -135,7 +135,7 @@ def open_world(shares: np.ndarray, excess: np.ndarray, prior: float = UNKNOWN_PR
     So a model whose pose fails the test on some touch never takes more than ``1 - prior`` of the
     probability, and far beyond the edge at most ``(1 - prior) miss / ((1 - prior) miss + prior)``;
     one within the noise on every touch leaves unknown about
-    ``prior exp(-touches CONSISTENT_SE^2 / 2) / (1 - prior)``, less with every touch."""
+    ``prior exp(-touches CONSISTENT_SE^2 / 2) / ((1 - prior) (1 - miss))``, less with every touch."""
     if not 0.0 <= prior < 1.0:
         raise ValueError(f"the prior of unknown must lie in [0, 1), not {prior!r}")
     if not 0.0 <= miss < 1.0:
@@ -260,8 +260,11 @@ class Evidence:
     @classmethod
     def from_json(cls, d: dict) -> "Evidence":
         k = len(d["models"])
-        misses = None if d.get("misses") is None else np.asarray(d["misses"], dtype=np.float64).reshape(k, -1)
-        return cls(tuple(d["models"]), np.asarray(d["distances"], dtype=np.float64).reshape(k, -1),
+        m = sum(int(n) for n in d["curve_sizes"])
+        misses = d.get("misses")
+        if misses is not None:
+            misses = np.asarray(misses, dtype=np.float64).reshape(k, len(misses[0]) if k else 0)
+        return cls(tuple(d["models"]), np.asarray(d["distances"], dtype=np.float64).reshape(k, m),
                    tuple(int(n) for n in d["curve_sizes"]), float(d["rho"]), float(d.get("noise", 0.0)),
                    tuple(float(x) for x in d.get("limits", ())), tuple(int(n) for n in d.get("touches", ())), misses)
 

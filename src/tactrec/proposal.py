@@ -2,9 +2,10 @@
 
 The hypotheses are the session's models, each at its joint pose
 (:mod:`tactrec.session`), with their probabilities.  The *leading* ones are
-the most probable, until they hold :data:`MASS` of the probability (at most
-:data:`LEADING`).  With one left there is nothing to separate and nothing is
-proposed.  Where no place suits every leading hypothesis (below), the least
+the most probable, until they hold :data:`MASS` of the models' probability
+(``unknown``'s aside; at most :data:`LEADING`).  With one left that holds
+:data:`MASS` of all the probability there is nothing to separate and nothing
+is proposed (with less, a touch to confirm it is: below).  Where no place suits every leading hypothesis (below), the least
 probable is left out until one does, down to the two most probable; the
 proposal lists the hypotheses it separates.
 
@@ -47,8 +48,8 @@ model's by 1.  The expected gain is the entropy of the models' probabilities
 now less its expectation over the truths after the touch, in bits.
 ``unknown`` is left out of the gain: what an object not in the database
 would show along the line cannot be predicted.  But with one hypothesis left
-and ``unknown`` holding more than ``1 - MASS``, a touch that its pose
-predicts is proposed to confirm it (each touch a pose fits makes unknown
+that holds less than :data:`MASS` of the probability (``unknown`` holding the
+rest), a touch that its pose predicts is proposed to confirm it (each touch a pose fits makes unknown
 less likely, :mod:`tactrec.probability`): the line of a place on its surface
 farthest from the earlier contacts, its gain the entropy between the model
 and unknown (what the touch can settle).
@@ -267,7 +268,8 @@ def propose(session, *, radius: float, angle: float = 60.0, candidates: int = CA
     leading = result.leading()
     hyps = [(h.model, probs.get(h.model, 0.0)) for h in leading]
     if len(leading) < 2:
-        if result.unknown <= 1.0 - MASS:
+        sure = probs.get(leading[0].model, 0.0)
+        if sure >= MASS:
             return Proposal(None, None, None, 0.0, hyps, "one hypothesis holds the probability: nothing to separate")
         # one model against unknown: a touch its pose predicts, as far from the others as reach allows
         confirm = _best_line(session, leading, np.ones(1), radius=radius, angle=angle, candidates=candidates,
@@ -276,7 +278,7 @@ def propose(session, *, radius: float, angle: float = 60.0, candidates: int = CA
             return Proposal(None, None, None, 0.0, hyps, f"no approach line within {radius:g} of the touches that "
                             f"{leading[0].model} takes")
         _, contact, normal, directions, line = confirm
-        gain = _entropy(np.array([result.confidence, result.unknown]))
+        gain = _entropy(np.array([sure, 1.0 - sure]))
         return Proposal(contact, normal, directions, gain, hyps, approach=line)
     for n in range(len(leading), 1, -1):
         # the most probable hypotheses that some reachable line suits
@@ -373,8 +375,8 @@ def _best_line(session, leading: list, weights: np.ndarray, *, radius: float, an
                 after = weights[None, :] * np.exp(-0.5 * np.minimum(z * z, 1400.0))
                 after = after / after.sum(axis=1, keepdims=True)
             gain = entropy - float(sum(truth[i] * _entropy(after[i]) for i in np.nonzero(takes)[0]))
-            best = int(np.argmax(p))                                     # the most probable pose's contact
-            contact = first_hit(models[poses[best].model], poses[best], line, spacing)
+            # where the most probable hypothesis' joint pose (its family's first) meets the line
+            contact = first_hit(models[poses[0].model], poses[0], line, spacing)
             found.append((gain, c if contact is None else contact, normal, directions, line))
     return _chosen(found, contacts, entropy)
 

@@ -15,8 +15,9 @@ after it two sessions go on from the same first touch:
     object, and a line that meets nothing is added as a missed touch
     (:meth:`tactrec.session.Session.add_miss`).
 
-A ``next`` session stops when nothing is left to separate (one hypothesis
-holds 99% of the probability); its later counts keep its last answer.  Sets:
+A ``next`` session stops when nothing is left to separate or confirm (one
+hypothesis holds 99% of the probability); its later counts keep its last
+answer.  Sets:
 
 ``hard-10``
     ``fast-vs-paper``'s hard touches on the ten ``paper-fig11`` scans: contact
@@ -174,6 +175,8 @@ def _next_touch(strategy, session, entry, world2model, spec, rng):
             hit = first_hit(entry.model, truth, proposal.approach, SPACING)
             if hit is None:
                 return proposal.approach
+            if np.array_equal(hit, proposal.approach.start):   # the line starts inside the object: no place
+                continue
             contact, directions = hit, proposal.directions
         else:
             # a random place within reach: sites are drawn until one is (on a large object few are)

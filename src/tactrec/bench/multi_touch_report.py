@@ -85,7 +85,7 @@ def summary(rows: list[dict], strategies, touches: int) -> dict:
                   for r in rows]
         # sure and wrong: a session whose answer at some touch count is wrong at confidence >= 0.95
         sure_wrong = sum(any(not s["correct"] and s["confidence"] >= SURE for s in r[strategy]) for r in rows)
-        adds = [s["seconds"] for r in rows for s in r[strategy][1:]]
+        adds = [s["seconds"] for r in rows for s in r[strategy][1:] if not s.get("missed")]    # a missed line searches nothing
         # an add to a session of n touches, against the added touch's own recognition: a session that
         # stops early leaves its easy adds out of the pooled median, so the medians per n are reported too
         by_n, own = [], []
@@ -118,15 +118,16 @@ def paired(rows: list[dict], touches: int) -> dict:
     """``next`` against random places on the same sessions (same first touch): the extra touches
     each needs to reach confidence 0.99 beyond the first (``touches`` - 1 where it never does), their
     means, how much fewer ``next`` needs (percent of random's), the sessions each is earlier in, and
-    the Wilcoxon signed-rank test's two-sided p-value of the paired differences (zeros dropped;
-    None when every difference is 0)."""
+    the Wilcoxon signed-rank test's two-sided p-value of the paired differences (zeros dropped, the
+    normal approximation with its correction for ties: the differences are small integers; None when
+    every difference is 0)."""
     from scipy.stats import wilcoxon
 
     extra = np.array([[_to_sure(r[s], touches) - 1 for s in ("next", "random")] for r in rows], dtype=np.float64)
     if not len(extra):
         return {}
     d = extra[:, 0] - extra[:, 1]
-    p = float(wilcoxon(d, zero_method="wilcox").pvalue) if np.any(d != 0) else None
+    p = float(wilcoxon(d, zero_method="wilcox", method="approx").pvalue) if np.any(d != 0) else None
     mean_next, mean_random = float(extra[:, 0].mean()), float(extra[:, 1].mean())
     return {"extra_next": mean_next, "extra_random": mean_random,
             "fewer_percent": 100.0 * (1.0 - mean_next / mean_random) if mean_random > 0 else None,

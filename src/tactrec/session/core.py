@@ -257,7 +257,7 @@ class Session:
         before this one, the new touch included even if step 4 calls it slipped: a touch is only
         left out as slipped once the search scoring its poses on every touch (step 5) has found
         none that fits them all."""
-        best = self.result.hypothesis(self.result.best) if self.result.best else None
+        best = self.result.ranking[0] if self.result.ranking else None              # the best fit
         return best is not None and all(c for i, c in enumerate(best.consistent) if i not in slipped)
 
     @property

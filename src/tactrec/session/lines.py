@@ -31,7 +31,8 @@ def cut_depth(model, hypothesis, line, step: float) -> float:
     x = line.points(step)
     moved = hypothesis.scale * (x @ hypothesis.rotation.T) + hypothesis.translation
     d = np.asarray(model.planes(moved)[0], dtype=np.float64) / hypothesis.scale
-    return float(max(0.0, -d.min()))
+    d = d[np.isfinite(d)]                     # a closed-form surface's distance is undefined where its gradient is 0
+    return float(max(0.0, -d.min())) if len(d) else 0.0
 
 
 def miss_excess(models: dict, hypotheses, lines, *, step: float, limit: float) -> np.ndarray:

@@ -92,7 +92,12 @@ class SessionResult:
 
     @property
     def best(self) -> str | None:
-        return self.ranking[0].model if self.ranking else None
+        """The most probable model (INTERFACE.md): the first by error unless a missed line or a touch its
+        pose fits worst has taken another's probability past it."""
+        if not self.ranking:
+            return None
+        p = self.probabilities
+        return max(self.ranking, key=lambda h: p.get(h.model, 0.0)).model if p else self.ranking[0].model
 
     @functools.cached_property
     def _outcomes(self) -> tuple[dict[str, float], float]:
