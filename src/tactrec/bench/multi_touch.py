@@ -31,8 +31,10 @@ answer.  Sets:
     Objects that share a shape, where one touch rarely tells them apart: each
     of the 78 YCB scans against a database of itself and the
     :data:`SIMILAR` - 1 scans most alike in shape (:func:`similar_scans`: the
-    nearest by a scale-free signature of the convex hull, so the cans meet the
-    cans, the boxes the boxes, the cups the cups), touched as ``hard-10`` is
+    nearest by a scale-free signature of the convex hull: the cracker,
+    pudding and gelatin boxes meet each other, a cup its neighbours in size,
+    the mug three cups, the master chef can the tomato soup can; the flat
+    tuna can meets the bowl), touched as ``hard-10`` is
     (the first touch anywhere on a face); ``ceil(instances / 10)`` sessions
     per scan.
 
