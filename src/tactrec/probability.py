@@ -244,6 +244,11 @@ class Evidence:
             return shares, 0.0
         return open_world(shares, self.excess(), prior, miss, max(len(self.limits), 1))
 
+    def named_outcomes(self, *, prior: float = UNKNOWN_PRIOR) -> tuple[dict[str, float], float]:
+        """:meth:`outcomes` with each model's probability by name: ``({model: p}, unknown)``."""
+        p, unknown = self.outcomes(prior=prior)
+        return dict(zip(self.models, p.tolist())), unknown
+
     def probabilities(self, *, prior: float = UNKNOWN_PRIOR, replicates: int = REPLICATES,
                       rng=SEED) -> np.ndarray:
         """Each model's probability ``(k,)`` (:meth:`outcomes`)."""

@@ -72,9 +72,8 @@ import numpy as np
 from scipy.special import erf
 
 from .io.session import MissedLine
-from .probability import CONSISTENT_SE
 from .registration.solver import jacobian
-from .session.lines import cut_depth, first_hit
+from .session.lines import first_hit, miss_excess
 from .session.result import LEADING, MASS
 
 __all__ = ["Proposal", "propose", "MASS", "LEADING", "STANDOFF", "CANDIDATES"]
@@ -292,14 +291,14 @@ def propose(session, *, radius: float, angle: float = 60.0, candidates: int = CA
 
 
 def _outcome(model, pose, line, directions, *, step: float, points: int, spacing: float):
-    """What ``line`` gives under ``pose``: ``("miss", None)``, ``("hit", points (k, 3))`` (the touch
-    predicted where it meets the surface), or ``(None, None)`` where the surface there will not take
-    the touch."""
+    """What ``line`` gives under ``pose``: ``("miss", None, None)``, ``("hit", points (k, 3), hit)``
+    (the touch predicted where it meets the surface, at world point ``hit``), or ``(None, None, hit)``
+    where the surface there will not take the touch."""
     hit = first_hit(model, pose, line, step)
     if hit is None:
-        return "miss", None
+        return "miss", None, None
     x = _predicted(model, pose, hit, directions, points=points, spacing=spacing)
-    return ("hit", x) if x is not None else (None, None)
+    return ("hit" if x is not None else None), x, hit
 
 
 def _best_line(session, leading: list, weights: np.ndarray, *, radius: float, angle: float, candidates: int, rng):
@@ -358,8 +357,7 @@ def _best_line(session, leading: list, weights: np.ndarray, *, radius: float, an
             z = np.zeros((len(poses), len(leading)))                    # (truth pose, model fitted)
             missing = (kinds == "miss")
             if missing.any():                # a truth that meets nothing: each model by its pose the line cuts least
-                cut = np.array([CONSISTENT_SE * cut_depth(models[g.model], g, line, spacing) / max(limit, 1e-300)
-                                for g in poses])
+                cut = miss_excess(models, poses, [line], step=spacing, limit=limit)[:, 0]
                 for k in range(len(leading)):
                     z[missing & (owner != k), k] = cut[owner == k].min()
             if hits.any():
@@ -375,8 +373,7 @@ def _best_line(session, leading: list, weights: np.ndarray, *, radius: float, an
                 after = weights[None, :] * np.exp(-0.5 * np.minimum(z * z, 1400.0))
                 after = after / after.sum(axis=1, keepdims=True)
             gain = entropy - float(sum(truth[i] * _entropy(after[i]) for i in np.nonzero(takes)[0]))
-            # where the most probable hypothesis' joint pose (its family's first) meets the line
-            contact = first_hit(models[poses[0].model], poses[0], line, spacing)
+            contact = outcomes[0][2]      # where the most probable hypothesis' joint pose (its family's first) meets it
             found.append((gain, c if contact is None else contact, normal, directions, line))
     return _chosen(found, contacts, entropy)
 

@@ -95,8 +95,7 @@ class Recognition:
     def _outcomes(self) -> tuple[dict[str, float], float]:
         if self.evidence is None:
             return {}, 1.0 if self.best is None else 0.0
-        p, unknown = self.evidence.outcomes(prior=self.unknown_prior)
-        return dict(zip(self.evidence.models, p.tolist())), unknown
+        return self.evidence.named_outcomes(prior=self.unknown_prior)
 
     @property
     def probabilities(self) -> dict[str, float]:

@@ -96,8 +96,7 @@ def _record(entry, touch, rec, extra: dict) -> dict:
 def scored(record: dict) -> dict:
     """``record`` with the probabilities of the current model: ``confidence`` (the recognised model's)
     and ``truth_probability`` (the touched model's)."""
-    found = Evidence.from_json(record["evidence"])
-    p = dict(zip(found.models, found.probabilities().tolist()))
+    p, _ = Evidence.from_json(record["evidence"]).named_outcomes()
     return dict(record, confidence=p.get(record["recognized"], 0.0), truth_probability=p.get(record["model"], 0.0))
 
 

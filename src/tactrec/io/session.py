@@ -118,9 +118,6 @@ class SessionMiss:
     translation: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(3))
     units: str | None = None
 
-    def in_world(self) -> MissedLine:
-        return self.line.transformed(self.rotation, self.translation)
-
     def to_json(self) -> dict:
         out = {"curves": [], "missed": self.line.to_json(),
                "sensor2world": {"rotation": self.rotation.tolist(), "translation": self.translation.tolist()}}

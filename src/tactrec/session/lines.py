@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..probability import CONSISTENT_SE
+from ..probability import CONSISTENT_SE, residuals
 
 __all__ = ["cut_depth", "miss_excess", "first_hit"]
 
@@ -28,9 +28,7 @@ __all__ = ["cut_depth", "miss_excess", "first_hit"]
 def cut_depth(model, hypothesis, line, step: float) -> float:
     """How far (world units) ``line`` (:class:`~tactrec.io.session.MissedLine`, world frame) cuts into
     ``model`` under ``hypothesis`` (``model = s R world + t``), sampled every ``step``; 0 outside."""
-    x = line.points(step)
-    moved = hypothesis.scale * (x @ hypothesis.rotation.T) + hypothesis.translation
-    d = np.asarray(model.planes(moved)[0], dtype=np.float64) / hypothesis.scale
+    d = residuals(model, hypothesis.rotation, hypothesis.translation, line.points(step), hypothesis.scale)
     d = d[np.isfinite(d)]                     # a closed-form surface's distance is undefined where its gradient is 0
     return float(max(0.0, -d.min())) if len(d) else 0.0
 
@@ -50,8 +48,7 @@ def first_hit(model, hypothesis, line, step: float) -> np.ndarray | None:
     the first sample of the line (every ``step``) inside the surface, interpolated linearly in signed
     distance from the sample before; the start where it starts inside; None where it meets nothing."""
     x = line.points(step)
-    moved = hypothesis.scale * (x @ hypothesis.rotation.T) + hypothesis.translation
-    d = np.asarray(model.planes(moved)[0], dtype=np.float64)
+    d = residuals(model, hypothesis.rotation, hypothesis.translation, x, hypothesis.scale)
     inside = np.nonzero(d <= 0.0)[0]
     if len(inside) == 0:
         return None

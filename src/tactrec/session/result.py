@@ -4,10 +4,9 @@ result over all models (:class:`SessionResult`); :mod:`tactrec.session` computes
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import numpy as np
-
-import functools
 
 from ..probability import AMBIGUOUS, UNKNOWN_PRIOR, Evidence
 
@@ -103,8 +102,7 @@ class SessionResult:
     def _outcomes(self) -> tuple[dict[str, float], float]:
         if self.evidence is None:
             return {}, 1.0
-        p, unknown = self.evidence.outcomes(prior=self.unknown_prior)
-        return dict(zip(self.evidence.models, p.tolist())), unknown
+        return self.evidence.named_outcomes(prior=self.unknown_prior)
 
     @property
     def probabilities(self) -> dict[str, float]:
