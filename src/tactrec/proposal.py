@@ -19,9 +19,10 @@ leading hypothesis the line's outcome is predicted: where it first meets the
 surface (:func:`tactrec.session.lines.first_hit`), and there the touch the
 sensor would record, or that it meets nothing.  The place need not lie on
 every hypothesis' surface: a line that one hypothesis says meets the surface
-8 mm before another does separates them best.  A pose whose surface meets
-the line but will not take the whole touch there is not a truth for that
-line.
+8 mm before another does separates them best.  A predicted curve runs up to
+where the surface turns an edge (the part a closest-point projection can
+follow); a pose whose surface there keeps less than :data:`KEPT` of each
+curve is not a truth for that line.
 
 Gain.  At a candidate, each pose predicts the outcome: three curves through
 where the line meets its surface, in the same world directions, as the
@@ -51,8 +52,9 @@ would show along the line cannot be predicted.  But with one hypothesis left
 that holds less than :data:`MASS` of the probability (``unknown`` holding the
 rest), a touch that its pose predicts is proposed to confirm it (each touch a pose fits makes unknown
 less likely, :mod:`tactrec.probability`): the line of a place on its surface
-farthest from the earlier contacts, its gain the entropy between the model
-and unknown (what the touch can settle).
+farthest from the earlier contacts among those its pose predicts to meet,
+its gain the entropy between the model and unknown (what the touch can
+settle).
 
 Choice.  The gain saturates: after one touch, most places that qualify
 separate the leading hypotheses at their poses completely, and their gains
@@ -80,6 +82,8 @@ __all__ = ["Proposal", "propose", "MASS", "LEADING", "STANDOFF", "CANDIDATES"]
 
 #: an approach line starts this fraction of ``radius`` outside its place and runs twice as far
 STANDOFF = 0.5
+#: a predicted curve is taken up to where the surface turns an edge, and must keep this share of its points
+KEPT = 0.25
 #: places tried on each leading hypothesis' surface: every line is cast and predicted under every pose of
 #: every leading hypothesis, and past a dozen the gains tie (the farthest of the tied places is proposed)
 CANDIDATES = 12
@@ -144,12 +148,15 @@ def _to_model(h, x_world: np.ndarray) -> np.ndarray:
 
 def _predicted(model, h, contact_w: np.ndarray, directions_w: np.ndarray, *, points: int, spacing: float):
     """The noise-free touch hypothesis ``h`` predicts at world point ``contact_w``, curves along the
-    world ``directions_w`` (each centred there): its points in the world ``(k, 3)``, or None where the
-    surface ends.  Each curve is the chord along its direction, ``spacing`` between points, projected
-    onto the surface twice (closest points); a curve whose points stop advancing (less than a quarter
-    of ``spacing`` apart: projected onto an edge) leaves the surface.  On the touches' scale this is
-    their plane section to well within the noise, at the cost of one batch of closest-point queries
-    (a plane section of a mesh costs a pass over all its faces)."""
+    world ``directions_w`` (each centred there): its points in the world ``(k, 3)`` and which of
+    them are predicted ``(k,)`` (bool), or None where the surface will not take the touch.  Each
+    curve is the chord along its direction, ``spacing`` between points, projected onto the surface
+    twice (closest points).  Where the projected points stop advancing (less than a quarter of
+    ``spacing`` apart: projected onto an edge) the surface turns a corner the projection cannot
+    follow: a curve is predicted over the run of points about the contact up to there, and a
+    touch whose curves keep less than :data:`KEPT` of their points each is not predicted.  On the
+    touches' scale this is their plane section to well within the noise, at the cost of one batch
+    of closest-point queries (a plane section of a mesh costs a pass over all its faces)."""
     R, t, s = h.rotation, h.translation, h.scale
     c = s * (np.asarray(contact_w, dtype=np.float64) @ R.T) + t
     d = np.asarray(directions_w, dtype=np.float64) @ R.T
@@ -159,10 +166,14 @@ def _predicted(model, h, contact_w: np.ndarray, directions_w: np.ndarray, *, poi
     for _ in range(2):
         dist, normals = model.planes(x)
         x = x - np.asarray(dist)[:, None] * np.asarray(normals)
-    steps = np.linalg.norm(np.diff(x.reshape(len(d), points, 3), axis=1), axis=2)
-    if not np.all(steps >= 0.25 * spacing * s):
+    advancing = np.linalg.norm(np.diff(x.reshape(len(d), points, 3), axis=1), axis=2) >= 0.25 * spacing * s
+    centre = (points - 1) // 2                              # the run of advancing steps about the contact
+    kept = np.ones((len(d), points), dtype=bool)
+    kept[:, centre + 1:] = np.cumprod(advancing[:, centre:], axis=1).astype(bool)
+    kept[:, :centre] = np.cumprod(advancing[:, :centre][:, ::-1], axis=1)[:, ::-1].astype(bool)
+    if not np.all(kept.sum(axis=1) >= KEPT * points):
         return None
-    return ((x - t) @ R) / s
+    return ((x - t) @ R) / s, kept.reshape(-1)
 
 
 #: a hypothesis' surface is drawn at random up to this many times ``candidates`` for reachable places
@@ -206,14 +217,15 @@ def _information(model, pose: np.ndarray, scale: float, x_world: np.ndarray) -> 
     return np.einsum("mi,mj->ij", J, J)
 
 
-def _refit(model, pose: np.ndarray, scale: float, H0: np.ndarray, x_world: np.ndarray):
+def _refit(model, pose: np.ndarray, scale: float, H0: np.ndarray, x_world: np.ndarray, kept: np.ndarray):
     """Each of ``n`` predicted touches ``x_world (n, k, 3)`` against ``model`` once the pose
-    ``(3, 4)`` is refitted to that touch and the earlier touches (information ``H0 (6, 6)``)
-    together, by one Gauss-Newton step (module text): the touch's signed distances after the step
-    ``(n, k)`` and the sum of squares the step adds to the earlier touches' ``(n,)``, world units."""
+    ``(3, 4)`` is refitted to that touch's predicted points (``kept (n, k)``, bool) and the earlier
+    touches (information ``H0 (6, 6)``) together, by one Gauss-Newton step (module text): the
+    touch's signed distances after the step ``(n, k)`` (0 where not predicted) and the sum of
+    squares the step adds to the earlier touches' ``(n,)``, world units."""
     n, k = x_world.shape[:2]
     r, J = _jacobian(model, (scale * x_world.reshape(-1, 3) @ pose[:, :3].T + pose[:, 3]))
-    r, J = r.reshape(n, k), J.reshape(n, k, 6)
+    r, J = r.reshape(n, k) * kept, J.reshape(n, k, 6) * kept[..., None]
     H = H0[None] + np.einsum("nmi,nmj->nij", J, J)
     b = np.einsum("nmi,nm->ni", J, r)
     ridge = 1e-12 * np.maximum(np.trace(H, axis1=1, axis2=2), 1e-300)
@@ -232,16 +244,19 @@ def _excess(offset: np.ndarray, sigma: float) -> np.ndarray:
     return folded - sigma * np.sqrt(2.0 / np.pi)
 
 
-def _separation(model, h, H0: np.ndarray, predicted: np.ndarray, sigma: float, earlier: int) -> np.ndarray:
+def _separation(model, h, H0: np.ndarray, predicted: np.ndarray, sigma: float, earlier: int,
+                kept: np.ndarray | None = None) -> np.ndarray:
     """How many standard errors ``(n,)`` the session's mean distance on ``model``, refitted from
     pose ``h`` (module text), would exceed the truth's if each of the ``predicted (n, k, 3)``
-    touches were added: the points' excess distances (:func:`_excess`; the earlier touches'
-    ``earlier`` points share the sum of squares the refit adds to them) over the spread of a
-    difference of two fits' mean distances over all the points."""
+    touches were added (their predicted points ``kept (n, k)``, bool; all by default): the points'
+    excess distances (:func:`_excess`; the earlier touches' ``earlier`` points share the sum of
+    squares the refit adds to them) over the spread of a difference of two fits' mean distances
+    over all the points."""
+    kept = np.ones(predicted.shape[:2], dtype=bool) if kept is None else np.asarray(kept, dtype=bool)
     pose = np.concatenate([h.rotation, h.translation[:, None]], axis=1)
-    offsets, added = _refit(model, pose, h.scale, H0, predicted)
-    total = offsets.shape[1] + earlier
-    excess = _excess(offsets, sigma).sum(axis=1) + earlier * _excess(np.sqrt(added / earlier), sigma)
+    offsets, added = _refit(model, pose, h.scale, H0, predicted, kept)
+    total = kept.sum(axis=1) + earlier
+    excess = (_excess(offsets, sigma) * kept).sum(axis=1) + earlier * _excess(np.sqrt(added / earlier), sigma)
     spread = sigma * np.sqrt(1.0 - 2.0 / np.pi)                      # a half-normal distance's
     return excess / (spread * np.sqrt(2.0 * total))
 
@@ -291,9 +306,9 @@ def propose(session, *, radius: float, angle: float = 60.0, candidates: int = CA
 
 
 def _outcome(model, pose, line, directions, *, step: float, points: int, spacing: float):
-    """What ``line`` gives under ``pose``: ``("miss", None, None)``, ``("hit", points (k, 3), hit)``
-    (the touch predicted where it meets the surface, at world point ``hit``), or ``(None, None, hit)``
-    where the surface there will not take the touch."""
+    """What ``line`` gives under ``pose``: ``("miss", None, None)``, ``("hit", (points (k, 3), kept (k,)), hit)``
+    (the touch predicted where it meets the surface, at world point ``hit``: :func:`_predicted`), or
+    ``(None, None, hit)`` where the surface there will not take the touch."""
     hit = first_hit(model, pose, line, step)
     if hit is None:
         return "miss", None, None
@@ -352,6 +367,8 @@ def _best_line(session, leading: list, weights: np.ndarray, *, radius: float, an
             if not np.all(by_model[takes].any(axis=0)):   # every model has a pose that predicts the outcome
                 continue
             hits = kinds == "hit"
+            if len(leading) == 1 and not hits.any():      # a touch to confirm a pose must meet its surface
+                continue
             # the truths: the poses with an outcome, each model keeping its probability
             truth = p * takes / (by_model @ (by_model[takes].sum(axis=0) / by_model.sum(axis=0)))
             z = np.zeros((len(poses), len(leading)))                    # (truth pose, model fitted)
@@ -361,13 +378,15 @@ def _best_line(session, leading: list, weights: np.ndarray, *, radius: float, an
                 for k in range(len(leading)):
                     z[missing & (owner != k), k] = cut[owner == k].min()
             if hits.any():
-                stacked = np.array([o[1] for o, hit in zip(outcomes, hits) if hit])
+                stacked = np.array([o[1][0] for o, hit in zip(outcomes, hits) if hit])
+                kept = np.array([o[1][1] for o, hit in zip(outcomes, hits) if hit])
                 for k in range(len(leading)):
                     others = (owner != k)[hits]
                     if not others.any():
                         continue
                     sep = np.min([_separation(models[poses[j].model], poses[j], info[j], stacked[others], sigma,
-                                              len(x_world)) for j in np.nonzero(owner == k)[0]], axis=0)
+                                              len(x_world), kept[others]) for j in np.nonzero(owner == k)[0]],
+                                 axis=0)
                     z[np.nonzero(hits)[0][others], k] = sep
             with np.errstate(under="ignore"):
                 after = weights[None, :] * np.exp(-0.5 * np.minimum(z * z, 1400.0))
