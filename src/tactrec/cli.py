@@ -196,6 +196,7 @@ def _format_result(name: str, result) -> str:
 
 def cmd_simulate(args) -> int:
     from .io.touch import save_touch
+    from .sensor import Imperfections
     from .simulation import simulate_random_touch, simulate_touch
     from .surfaces import load_model
 
@@ -209,9 +210,14 @@ def cmd_simulate(args) -> int:
         raise InputError("--uv is for closed-form surfaces; use --vertex or --at on a mesh", args.model)
     rng = np.random.default_rng(args.seed)
     spacing = args.spacing if args.spacing is not None else model.size / 100.0
+    try:
+        imperfections = Imperfections(tip_radius=args.tip_radius, uneven=args.uneven, jitter=args.jitter,
+                                      outliers=args.outliers, miss=args.miss, bend=args.bend)
+    except ValueError as exc:
+        raise InputError(str(exc), "tactrec simulate") from None
     options = dict(points=args.points, spacing=spacing, angle=args.angle, curves=args.curves, noise=args.noise,
                    noise_kind=args.noise_kind, outward=not args.no_outward, contact=args.contact,
-                   sensor_frame=not args.model_frame)
+                   sensor_frame=not args.model_frame, imperfections=imperfections)
     try:
         if args.at is not None:
             site = model.locate(_floats(args.at, 3, "--at"))
@@ -230,7 +236,7 @@ def cmd_simulate(args) -> int:
     save_touch(data, args.out)
     if not args.quiet:
         t = data.meta["truth"]
-        print(f"{args.out}: {len(data.curves)} curves x {args.points} points on {model.name} at "
+        print(f"{args.out}: {len(data.curves)} curves x {len(data.curves[0])} points on {model.name} at "
               f"({', '.join(f'{x:.4g}' for x in t['contact'])}), spacing {spacing:.4g}")
     return 0
 
@@ -329,6 +335,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-outward", action="store_true", help="leave out the outward hint")
     p.add_argument("--contact", action="store_true", help="include the (noise-free) contact point")
     p.add_argument("--model-frame", action="store_true", help="no random rigid motion (data in the model frame)")
+    sensor = p.add_argument_group("as a real sensor records (model units; see tactrec.sensor)")
+    sensor.add_argument("--tip-radius", type=_nonnegative, default=0.0,
+                        help="the points are the centres of a spherical tip of this radius")
+    sensor.add_argument("--uneven", type=_nonnegative, default=1.0,
+                        help="ratio of the longest step between points to the shortest (default 1: even)")
+    sensor.add_argument("--jitter", type=_nonnegative, default=0.0, help="Gaussian sigma on every coordinate")
+    sensor.add_argument("--outliers", type=_nonnegative, default=0.0,
+                        help="share of the points moved 0.5-3 units off the trace (below 0.5)")
+    sensor.add_argument("--miss", type=_nonnegative, default=0.0,
+                        help="how far each curve passes from the contact")
+    sensor.add_argument("--bend", type=_nonnegative, default=0.0,
+                        help="how far each stroke leaves its plane at its ends")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     _mesh_options(p)
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")

@@ -14,6 +14,7 @@ from functools import cached_property
 
 import numpy as np
 
+from .errors import InputError
 from .estimation import LocalGeometry, estimate, noise_level
 from .io.touch import TactileData
 
@@ -59,6 +60,9 @@ class Touch:
     @classmethod
     def from_data(cls, data: TactileData, *, window: int | str | None = "auto", degree: int = 3,
                   curvature_method: str = "auto") -> "Touch":
+        if data.tip_radius > 0:
+            raise InputError(f"tip_radius {data.tip_radius:g}: tactrec does not register the centres of a round tip "
+                             "yet; give points on the surface (tip_radius 0)", data.source)
         geometry = estimate(data, window=window, degree=degree, method=curvature_method)
         noise = float(np.median([noise_level(np.asarray(c, dtype=np.float64)) for c in data.curves]))
         return cls(data, geometry, 1.0, noise)

@@ -5,7 +5,10 @@ normal there, adjacent planes ``angle`` apart; points at equal arc-length
 spacing centred on the contact; uniform (``+/- noise``) or Gaussian (sigma
 ``noise``) noise on every coordinate; then a random rigid motion, since a
 sensor never reports in the model's frame.  The truth (site, contact, normal
-and the data-to-model pose) is kept in ``data.meta["truth"]``.
+and the data-to-model pose) is kept in ``data.meta["truth"]``.  A touch as a
+real sensor records it (a round tip, uneven steps, jitter, outliers, strokes
+that miss the contact or bend out of their plane) takes
+:class:`tactrec.sensor.Imperfections`.
 """
 
 from __future__ import annotations
@@ -16,6 +19,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from .io.touch import TactileData
+from .sensor import Imperfections, record
 from .surfaces.base import SurfaceModel
 
 __all__ = ["simulate_touch", "simulate_random_touch", "random_rigid_motion", "spread_vertices", "sensor_to_world",
@@ -33,7 +37,8 @@ def random_rigid_motion(rng, *, extent: float) -> tuple[np.ndarray, np.ndarray]:
 def simulate_touch(model: SurfaceModel, site, *, points: int = 61, spacing: float, angle: float = 60.0,
                    curves: int = 3, noise: float = 0.0, noise_kind: str = "uniform",
                    first_direction: float | None = None, outward: bool = True, contact: bool = False,
-                   sensor_frame: bool = True, units: str | None = None, rng=None) -> TactileData:
+                   sensor_frame: bool = True, units: str | None = None, imperfections: Imperfections | None = None,
+                   rng=None) -> TactileData:
     """Simulate one touch at ``site`` of ``model``.
 
     Parameters
@@ -61,6 +66,9 @@ def simulate_touch(model: SurfaceModel, site, *, points: int = 61, spacing: floa
         Include the (noise-free) contact point.
     sensor_frame : bool
         Apply a random rigid motion (default); ``False`` keeps the model frame.
+    imperfections : Imperfections, optional
+        What the sensor does to the touch (:mod:`tactrec.sensor`); the file then carries the tip
+        radius, and the truth the imperfections and the outliers' points.
     rng : seed or Generator
     """
     rng = np.random.default_rng(rng)
@@ -74,23 +82,29 @@ def simulate_touch(model: SurfaceModel, site, *, points: int = 61, spacing: floa
     start = rng.uniform(0.0, 2 * np.pi) if first_direction is None else float(first_direction)
     angles = start + np.deg2rad(angle) * np.arange(curves)
     tangents = np.cos(angles)[:, None] * frame.d1 + np.sin(angles)[:, None] * frame.d2
-    if hasattr(model, "plane_sections"):
-        sections = model.plane_sections(frame.site, tangents, spacing=spacing, count=points)
+    imperfect = imperfections is not None and not imperfections.perfect
+    if imperfect:
+        sections, done = record(model, frame, tangents, spacing=spacing, points=points, imperfections=imperfections,
+                                rng=rng)
+    elif hasattr(model, "plane_sections"):
+        sections = list(model.plane_sections(frame.site, tangents, spacing=spacing, count=points))
     else:
-        sections = np.stack([model.plane_section(frame.site, t, spacing=spacing, count=points) for t in tangents])
+        sections = [model.plane_section(frame.site, t, spacing=spacing, count=points) for t in tangents]
     if noise > 0:
         if noise_kind == "uniform":
-            sections = sections + rng.uniform(-noise, noise, size=sections.shape)
+            sections = [c + rng.uniform(-noise, noise, size=c.shape) for c in sections]
         else:
-            sections = sections + rng.normal(0.0, noise, size=sections.shape)
+            sections = [c + rng.normal(0.0, noise, size=c.shape) for c in sections]
     truth = {
         "model": model.name,
         "site": np.asarray(frame.site, dtype=float).tolist(),
         "contact": frame.point.tolist(),
         "normal": frame.normal.tolist(),
     }
-    data = TactileData.from_arrays(list(sections), contact=frame.point if contact else None,
-                                   outward=frame.normal if outward else None, units=units or model.units)
+    tip = imperfections.tip_radius if imperfect else 0.0
+    data = TactileData.from_arrays(sections, contact=frame.point + tip * frame.normal if contact else None,
+                                   outward=frame.normal if outward else None, units=units or model.units,
+                                   tip_radius=tip)
     if sensor_frame:
         R, t = random_rigid_motion(rng, extent=model.size)
         data = data.transformed(R, t)
@@ -100,9 +114,12 @@ def simulate_touch(model: SurfaceModel, site, *, points: int = 61, spacing: floa
         truth["rotation"] = np.eye(3).tolist()
         truth["translation"] = [0.0, 0.0, 0.0]
     truth.update(points=points, spacing=spacing, angle=angle, noise=noise, noise_kind=noise_kind)
+    if imperfect:
+        truth["imperfections"] = imperfections.to_json() | done
     meta = {"truth": truth}
     return TactileData.from_arrays(list(data.curves), contact=data.contact, outward=data.outward,
-                                   units=data.units, meta=meta, source=f"<simulated {model.name}>")
+                                   units=data.units, meta=meta, source=f"<simulated {model.name}>",
+                                   tip_radius=data.tip_radius)
 
 
 def simulate_random_touch(model: SurfaceModel, *, rng=None, attempts: int = 200, margin: float = 0.0,

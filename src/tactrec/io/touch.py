@@ -44,6 +44,9 @@ class TactileData:
         A direction pointing away from the object at ``p``, if known.
     units : str or None
         Length units of the coordinates (``"mm"``, ``"m"``, ...).
+    tip_radius : float
+        The points are the centres of a spherical tip of this radius (data units; 0: points on
+        the surface).
     meta : dict
         Anything else the file carried (e.g. ``"truth"`` of a simulated touch).
     source : str
@@ -56,10 +59,11 @@ class TactileData:
     units: str | None = None
     meta: dict = dataclasses.field(default_factory=dict)
     source: str = "<data>"
+    tip_radius: float = 0.0
 
     @classmethod
     def from_arrays(cls, curves: Sequence, *, contact=None, outward=None, units=None,
-                    meta=None, source: str = "<data>") -> "TactileData":
+                    meta=None, source: str = "<data>", tip_radius=0.0) -> "TactileData":
         """Validate and build.  Raises :class:`InputError` naming ``source``."""
         if not isinstance(curves, (list, tuple)) and not (isinstance(curves, np.ndarray) and curves.ndim == 3):
             raise InputError("'curves' must be a list of curves", source)
@@ -86,7 +90,10 @@ class TactileData:
                 unit_scale(units)
             except ValueError as exc:
                 raise InputError(str(exc), source) from None
-        return cls(tuple(arrays), c, o, units, dict(meta or {}), source)
+        if isinstance(tip_radius, bool) or not isinstance(tip_radius, (int, float, np.floating, np.integer)) \
+                or not math.isfinite(tip_radius) or tip_radius < 0:
+            raise InputError(f"'tip_radius' must be a non-negative number (got {tip_radius!r})", source)
+        return cls(tuple(arrays), c, o, units, dict(meta or {}), source, float(tip_radius))
 
     @property
     def points(self) -> np.ndarray:
@@ -108,6 +115,7 @@ class TactileData:
             curves=tuple(move(c) for c in self.curves),
             contact=None if self.contact is None else move(self.contact),
             outward=None if self.outward is None else self.outward @ R.T,
+            tip_radius=scale * self.tip_radius,
         )
 
     def to_json(self) -> dict[str, Any]:
@@ -119,6 +127,8 @@ class TactileData:
             out["contact"] = self.contact.tolist()
         if self.outward is not None:
             out["outward"] = self.outward.tolist()
+        if self.tip_radius > 0:
+            out["tip_radius"] = self.tip_radius
         out.update(self.meta)
         return out
 
@@ -176,9 +186,10 @@ def _parse_json(text: str, source: str) -> TactileData:
         raise InputError("expected a JSON object with 'curves'", source)
     if "curves" not in obj:
         raise InputError("missing 'curves'", source)
-    meta = {k: v for k, v in obj.items() if k not in {"curves", "contact", "outward", "units"}}
+    meta = {k: v for k, v in obj.items() if k not in {"curves", "contact", "outward", "units", "tip_radius"}}
     return TactileData.from_arrays(obj["curves"], contact=obj.get("contact"), outward=obj.get("outward"),
-                                   units=obj.get("units"), meta=meta, source=source)
+                                   units=obj.get("units"), meta=meta, source=source,
+                                   tip_radius=obj.get("tip_radius", 0.0))
 
 
 def _parse_csv(text: str, source: str) -> TactileData:
@@ -235,6 +246,8 @@ def save_touch(data: TactileData, path: str | os.PathLike) -> None:
     """Write a touch as JSON (or CSV, by suffix), atomically."""
     path = Path(path)
     if path.suffix.lower() == ".csv":
+        if data.tip_radius > 0:
+            raise InputError("a CSV touch file has no place for tip_radius: write it as .json", path)
         lines = ["curve,x,y,z"]
         for i, c in enumerate(data.curves, start=1):
             lines += [f"{i},{x!r},{y!r},{z!r}" for x, y, z in c.tolist()]

@@ -1,0 +1,185 @@
+"""How a real sensor records a touch: the imperfections a simulated touch can carry.
+
+A simulated touch (:func:`tactrec.simulation.simulate_touch`) is by default an
+exact plane section of the model, evenly sampled.  A robot's sensor records
+something else, and :class:`Imperfections` describes what, each part on its
+own scale and all of them seeded with the touch's ``rng``:
+
+``miss``
+    the strokes pass near the contact rather than through it: each curve is
+    the plane section through a surface point ``miss`` from the contact,
+    across its own direction (to a random side), so the curves miss each
+    other by up to about ``2 miss`` while each stays on the surface;
+``bend``
+    a stroke leaves its plane: each point is pushed across the plane by
+    ``bend (s / s_end)^3`` (``s`` its arc length from the contact: an S,
+    each end to its own side, its sign random per curve) and put back on
+    the surface (closest points).  Its ends then lie about ``0.4 bend`` from
+    the curve's best plane (a push even in ``s`` would only tilt the plane);
+``uneven``
+    points sampled in time while the speed varies: the steps between
+    neighbouring points are uniform between ``a`` and ``uneven x a``, their
+    mean the touch's spacing (1: even steps, the default), each curve
+    keeping its length about the contact;
+``tip_radius``
+    the points are the centres of a spherical tip of that radius: each
+    surface point moved outward along the surface's normal there (so every
+    point lies at the radius from the surface);
+``jitter``
+    Gaussian noise of that sigma on every coordinate, on top of the
+    simulation's own ``noise``;
+``outliers``
+    that share of the points (rounded) moved in a random direction by a
+    distance uniform in ``outlier_size`` (slips and spikes).
+
+Lengths are in the model's units.  The truth of a simulated touch records
+the imperfections and which points were made outliers.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+__all__ = ["Imperfections", "record"]
+
+#: a curve is sampled this many times more finely than the touch's spacing before it is resampled
+FINE = 4
+
+
+@dataclasses.dataclass(frozen=True)
+class Imperfections:
+    """What a sensor does to a touch (module text); the defaults record it perfectly.
+
+    Attributes
+    ----------
+    tip_radius : float
+        Radius of the spherical tip whose centres are recorded, model units.
+    uneven : float
+        Ratio of the longest to the shortest step between neighbouring points (>= 1).
+    jitter : float
+        Gaussian sigma per coordinate, model units.
+    outliers : float
+        Share of the points moved off the trace, in ``[0, 0.5)``.
+    outlier_size : (float, float)
+        Least and largest distance an outlier is moved, model units.
+    miss : float
+        How far each curve's plane passes from the contact, model units.
+    bend : float
+        How far a stroke leaves its plane at its ends, model units.
+    """
+
+    tip_radius: float = 0.0
+    uneven: float = 1.0
+    jitter: float = 0.0
+    outliers: float = 0.0
+    outlier_size: tuple = (0.5, 3.0)
+    miss: float = 0.0
+    bend: float = 0.0
+
+    def __post_init__(self):
+        for name in ("tip_radius", "jitter", "miss", "bend"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value >= 0):
+                raise ValueError(f"{name} must be a non-negative number, not {value!r}")
+        if not (np.isfinite(self.uneven) and self.uneven >= 1.0):
+            raise ValueError(f"uneven is the ratio of the longest step to the shortest: at least 1, not {self.uneven!r}")
+        if not (0.0 <= self.outliers < 0.5):
+            raise ValueError(f"outliers is a share of the points in [0, 0.5), not {self.outliers!r}")
+        lo, hi = (float(x) for x in self.outlier_size)
+        if not (np.isfinite(hi) and 0.0 <= lo <= hi):
+            raise ValueError(f"outlier_size must be two distances, least first, not {self.outlier_size!r}")
+        object.__setattr__(self, "outlier_size", (lo, hi))
+
+    @property
+    def perfect(self) -> bool:
+        """Whether nothing is done to the touch."""
+        return self == Imperfections(outlier_size=self.outlier_size)
+
+    def to_json(self) -> dict:
+        return dataclasses.asdict(self) | {"outlier_size": list(self.outlier_size)}
+
+
+def _on_surface(model, x: np.ndarray) -> np.ndarray:
+    """Points ``(n, 3)`` moved onto the surface (two closest-point passes along the planes' normals)."""
+    for _ in range(2):
+        dist, normals = model.planes(x)
+        x = x - np.asarray(dist)[:, None] * np.asarray(normals)
+    return x
+
+
+def _resampled(curve: np.ndarray, centre: int, spacing: float, ratio: float, rng) -> np.ndarray:
+    """Points along the polyline ``curve (n, 3)`` at steps uniform in ``[a, ratio a]`` (mean ``spacing``)
+    from its point ``centre`` outwards both ways, up to its ends."""
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(curve, axis=0), axis=1))])
+    arc = arc - arc[centre]
+    a = 2.0 * spacing / (1.0 + ratio)
+    sides = []
+    for end in (arc[-1], -arc[0]):
+        steps = rng.uniform(a, ratio * a, size=int(np.ceil(end / a)) + 1)
+        s = np.cumsum(steps)
+        sides.append(s[s <= end + 1e-12 * max(end, 1.0)])
+    s = np.concatenate([-sides[1][::-1], [0.0], sides[0]])
+    return np.stack([np.interp(s, arc, curve[:, j]) for j in range(3)], axis=1)
+
+
+def record(model, frame, tangents: np.ndarray, *, spacing: float, points: int, imperfections: Imperfections,
+           rng) -> tuple[list, dict]:
+    """The curves ``(n_i, 3)`` a sensor records along ``tangents (k, 3)`` at the site ``frame`` of
+    ``model`` (a :class:`~tactrec.surfaces.base.SiteFrame`), model frame, with ``imperfections``
+    (module text), and what was done (``{"outlier_points": [[curve, index], ...], ...}``).
+
+    Without ``uneven`` the curves have ``points`` points ``spacing`` apart as a perfect touch's.
+    To bend or resample a curve its section is taken :data:`FINE` times more finely (resampled
+    points are put back on the surface).  Raises ``ValueError``
+    where a section leaves the surface."""
+    imp = imperfections
+    fine = FINE if imp.uneven > 1.0 or imp.bend > 0 else 1               # finer only to resample or bend
+    fine_count = (points - 1) * fine + 1
+    centre = (fine_count - 1) // 2
+    if imp.miss == 0 and hasattr(model, "plane_sections"):
+        sections = list(model.plane_sections(frame.site, tangents, spacing=spacing / fine, count=fine_count))
+        sites = [frame.site] * len(tangents)
+    else:
+        sections, sites = [], []
+        for tangent in tangents:
+            site = frame.site
+            if imp.miss > 0:
+                across = np.cross(frame.normal, tangent)
+                across = across / np.linalg.norm(across) * rng.choice((-1.0, 1.0))
+                site = model.locate(frame.point + imp.miss * across)
+            sections.append(model.plane_section(site, tangent, spacing=spacing / fine, count=fine_count))
+            sites.append(site)
+    curves = []
+    for tangent, site, curve in zip(tangents, sites, sections):
+        if imp.bend > 0:
+            normal = model.site_frame(site).normal
+            side = np.cross(tangent, normal)
+            side = side / np.linalg.norm(side) * rng.choice((-1.0, 1.0))
+            s = (np.arange(fine_count) - centre) / centre
+            curve = _on_surface(model, curve + imp.bend * (s * s * s)[:, None] * side)
+        if imp.uneven > 1.0:
+            curve = _on_surface(model, _resampled(curve, centre, spacing, imp.uneven, rng))
+        else:
+            curve = curve[::fine]
+        if imp.tip_radius > 0:
+            _, normals = model.planes(curve)
+            curve = curve + imp.tip_radius * np.asarray(normals)
+        curves.append(curve)
+    if imp.jitter > 0:
+        curves = [c + rng.normal(0.0, imp.jitter, size=c.shape) for c in curves]
+    moved = []
+    total = sum(len(c) for c in curves)
+    count = int(round(imp.outliers * total))
+    if count:
+        which = np.sort(rng.choice(total, size=count, replace=False))
+        bounds = np.cumsum([0] + [len(c) for c in curves])
+        direction = rng.normal(size=(count, 3))
+        direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+        size = rng.uniform(*imp.outlier_size, size=count)
+        for j, d, r in zip(which, direction, size):
+            i = int(np.searchsorted(bounds, j, side="right") - 1)
+            curves[i][j - bounds[i]] += r * d
+            moved.append([i, int(j - bounds[i])])
+    return curves, {"outlier_points": moved}

@@ -1,0 +1,152 @@
+"""Touches as a real sensor records them (tactrec.sensor, tactrec simulate's sensor options)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from tactrec.cli import main
+from tactrec.errors import InputError
+from tactrec.io.touch import load_touch, save_touch
+from tactrec.sensor import Imperfections
+from tactrec.simulation import simulate_random_touch
+from tactrec.surfaces import load_model
+
+RADIUS = 33.0                                   # the built-in sphere-33, centred at the origin
+TOUCH = dict(points=41, spacing=0.3, angle=60.0, sensor_frame=False)
+
+
+@pytest.fixture(scope="module")
+def sphere():
+    return load_model("sphere-33")
+
+
+@pytest.fixture(scope="module")
+def mug():
+    return load_model("mug")
+
+
+def _touches(model, imperfections, count=20, seed=0):
+    return [simulate_random_touch(model, rng=np.random.default_rng([seed, k]), imperfections=imperfections, **TOUCH)
+            for k in range(count)]
+
+
+def _radial(data):
+    return [np.linalg.norm(c, axis=1) - RADIUS for c in data.curves]
+
+
+def test_a_perfect_sensor_changes_nothing(sphere, mug):
+    """Imperfections() gives the same bits as no imperfections, on a closed-form surface and a mesh."""
+    for model in (sphere, mug):
+        for k in range(3):
+            a = simulate_random_touch(model, rng=k, points=21, spacing=0.3, noise=0.02, noise_kind="gaussian")
+            b = simulate_random_touch(model, rng=k, points=21, spacing=0.3, noise=0.02, noise_kind="gaussian",
+                                      imperfections=Imperfections())
+            assert all(np.array_equal(x, y) for x, y in zip(a.curves, b.curves)) and b.tip_radius == 0
+
+
+def test_a_round_tip_records_its_centres_at_the_radius(sphere, mug):
+    """With a 2 mm tip every point lies 2 mm outside the surface (on the sphere exactly; on the mug's
+    convex places within its facets' error), the file carries the radius, and the same seed gives
+    the same touch."""
+    for data in _touches(sphere, Imperfections(tip_radius=2.0)):
+        assert data.tip_radius == 2.0
+        assert all(np.allclose(r, 2.0, atol=1e-9) for r in _radial(data))
+    tip = Imperfections(tip_radius=2.0)
+    for k in range(5):
+        data = simulate_random_touch(mug, rng=k, imperfections=tip, **TOUCH)
+        again = simulate_random_touch(mug, rng=k, imperfections=tip, **TOUCH)
+        assert all(np.array_equal(x, y) for x, y in zip(data.curves, again.curves))
+        distance = mug.planes(data.points)[0]
+        assert np.median(np.abs(distance - 2.0)) < 0.05
+
+
+def test_uneven_steps_keep_the_curves_length_and_mean_spacing(sphere):
+    """Steps between points lie between a and 6a (their mean the spacing, within 10% over 20 touches),
+    the longest at least three times the shortest on every curve, each curve spans its perfect
+    length within a longest step each side, and every point stays on the surface."""
+    steps, length = [], 40 * 0.3
+    for data in _touches(sphere, Imperfections(uneven=6.0)):
+        for c in data.curves:
+            s = np.linalg.norm(np.diff(c, axis=0), axis=1)
+            a = 2 * 0.3 / 7
+            assert s.min() >= a * (1 - 1e-6) and s.max() <= 6 * a * (1 + 1e-3) and s.max() > 3 * s.min()
+            assert abs(s.sum() - length) <= 2 * 6 * a                 # each side short by a step at most
+            steps.append(s)
+        assert all(np.allclose(r, 0.0, atol=1e-6) for r in _radial(data))
+    assert abs(np.mean(np.concatenate(steps)) - 0.3) < 0.03
+
+
+def test_jitter_and_outliers(sphere):
+    """Jitter of 0.02 shows as radial scatter of 0.02 (within 15%, 20 touches); 3% outliers move that
+    many points (rounded), each named in the truth and off the surface, while every other point
+    stays on it."""
+    scatter = np.concatenate([np.concatenate(_radial(d)) for d in _touches(sphere, Imperfections(jitter=0.02))])
+    assert abs(np.std(scatter) - 0.02) < 0.003
+    for data in _touches(sphere, Imperfections(outliers=0.03)):
+        moved = data.meta["truth"]["imperfections"]["outlier_points"]
+        assert len(moved) == round(0.03 * sum(len(c) for c in data.curves))
+        radial = _radial(data)
+        off = np.zeros(len(data.points), dtype=bool)
+        bounds = np.cumsum([0] + [len(c) for c in data.curves])
+        for i, j in moved:
+            off[bounds[i] + j] = True
+        r = np.concatenate(radial)
+        assert np.all(np.abs(r[off]) > 1e-3) and np.allclose(r[~off], 0.0, atol=1e-9)
+
+
+def test_strokes_that_miss_the_contact_or_bend(sphere):
+    """With ``miss`` 0.3 each curve passes 0.3 from the contact (within 2%) and the curves no longer
+    meet; with ``bend`` 0.2 each stroke leaves its best plane by 0.05-0.1 (0.4 bend) at its ends; both stay on
+    the surface."""
+    for data in _touches(sphere, Imperfections(miss=0.3), count=12):
+        contact = np.asarray(data.meta["truth"]["contact"])
+        nearest = [np.min(np.linalg.norm(c - contact, axis=1)) for c in data.curves]
+        assert np.allclose(nearest, 0.3, rtol=0.02)
+        assert all(np.allclose(r, 0.0, atol=1e-9) for r in _radial(data))
+    for data in _touches(sphere, Imperfections(bend=0.2), count=12):
+        for c in data.curves:
+            centred = c - c.mean(axis=0)
+            normal = np.linalg.svd(centred)[2][2]
+            off = np.abs(centred @ normal)
+            assert 0.05 < off.max() < 0.1
+        assert all(np.allclose(r, 0.0, atol=1e-6) for r in _radial(data))
+
+
+def test_imperfections_are_validated_and_files_carry_the_tip(tmp_path, sphere):
+    """Impossible settings are refused; the tip radius goes through a JSON file and refuses CSV."""
+    for bad in (dict(uneven=0.5), dict(outliers=0.6), dict(tip_radius=-1.0), dict(jitter=np.nan),
+                dict(outlier_size=(3.0, 0.5))):
+        with pytest.raises(ValueError):
+            Imperfections(**bad)
+    data = _touches(sphere, Imperfections(tip_radius=1.5), count=1)[0]
+    save_touch(data, tmp_path / "t.json")
+    assert load_touch(tmp_path / "t.json").tip_radius == 1.5
+    with pytest.raises(InputError, match="tip_radius"):
+        save_touch(data, tmp_path / "t.csv")
+    text = json.loads((tmp_path / "t.json").read_text())
+    text["tip_radius"] = "big"
+    (tmp_path / "bad.json").write_text(json.dumps(text))
+    with pytest.raises(InputError, match="tip_radius"):
+        load_touch(tmp_path / "bad.json")
+
+
+def test_simulate_takes_every_sensor_option(tmp_path, capsys):
+    """``tactrec simulate`` with every sensor option writes a seeded touch carrying them; a bad value
+    is one line and exit status 2, and so is recognising a touch recorded by a round tip."""
+    args = ["simulate", "sphere-33", "--spacing", "0.3", "--points", "41", "--tip-radius", "1", "--uneven", "4",
+            "--jitter", "0.01", "--outliers", "0.02", "--miss", "0.2", "--bend", "0.1", "--seed", "4"]
+    assert main(args + ["--out", str(tmp_path / "a.json"), "--quiet"]) == 0
+    assert main(args + ["--out", str(tmp_path / "b.json"), "--quiet"]) == 0
+    a = json.loads((tmp_path / "a.json").read_text())
+    assert a == json.loads((tmp_path / "b.json").read_text())
+    assert a["tip_radius"] == 1.0 and a["truth"]["imperfections"]["uneven"] == 4.0
+    assert main(["simulate", "sphere-33", "--out", str(tmp_path / "c.json"), "--uneven", "0.5"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "uneven" in err[0] and not (tmp_path / "c.json").exists()
+    # a round tip's centres are refused by recognition, in one line, rather than registered as surface points
+    assert main(["recognize", str(tmp_path / "a.json"), "--models", "sphere-33"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "tip_radius" in err[0] and "a.json" in err[0]
