@@ -9,6 +9,7 @@ never a half-written output file.
 from __future__ import annotations
 
 import json
+import warnings
 from pathlib import Path
 
 import pytest
@@ -592,3 +593,57 @@ def test_bench_paper_option_is_checked_before_any_work(tmp_path, capsys):
         bad(capsys, ["bench", name, "--paper-option", "parabola_points=1", "--out", tmp_path / "bench"],
             "--method", "parabola_points must be a whole number >= 2")
     assert files_in(tmp_path) == []
+
+
+# ------------------------------------------------------- absurd coordinates
+
+
+def test_absurd_coordinates_are_refused_before_arithmetic(tmp_path, capsys):
+    """Coordinates no sensor records (beyond 1e12, a touch spanning under 1e-12, or one a million
+    times its extent from its frame's origin) and touches a thousand times off every model's size are refused in one line
+    naming the file, before any arithmetic could warn."""
+    obj = json.loads(simulate_ok(tmp_path).read_text())
+
+    def written(name, move):
+        out = dict(obj, curves=[[move(p) for p in c] for c in obj["curves"]])
+        out.pop("outward", None)
+        path = tmp_path / name
+        path.write_text(json.dumps(out))
+        return path
+
+    bad(capsys, recognize(written("huge.json", lambda p: [x * 1e200 for x in p])), "huge.json", "beyond 1e+12")
+    bad(capsys, recognize(written("far.json", lambda p: [x + 1e9 for x in p])), "far.json", "from its frame's origin")
+    bad(capsys, recognize(written("speck.json", lambda p: [x * 1e-20 for x in p])), "speck.json", "spans")
+    bad(capsys, recognize(written("large.json", lambda p: [x * 1e7 for x in p])), "large.json", "are its units right")
+    bad(capsys, recognize(written("small.json", lambda p: [x * 1e-7 for x in p])), "small.json", "are its units right")
+
+
+def test_fuzzed_magnitudes_give_a_result_or_one_line(tmp_path, capfd):
+    """200 seeded touch files whose coordinates are scaled and shifted by powers of ten from 1e-300 to
+    1e300, some with one coordinate blown up: each gives a result (exit 0) or one ``tactrec:`` line
+    (exit 2), and nothing else reaches stderr (no numpy warning, no LAPACK message)."""
+    import numpy as np
+
+    obj = json.loads(simulate_ok(tmp_path).read_text())
+    obj.pop("outward", None)
+    rng = np.random.default_rng(50)
+    outcomes = {0: 0, 2: 0}
+    for k in range(200):
+        scale = 10.0 ** rng.uniform(-300, 300) if k % 4 else 10.0 ** rng.uniform(-4, 4)
+        shift = rng.choice((-1.0, 1.0)) * 10.0 ** rng.uniform(-300, 300) if k % 3 else 0.0
+        curves = np.array(obj["curves"]) * scale + shift
+        if k % 5 == 0:
+            curves[rng.integers(3), rng.integers(21), rng.integers(3)] = rng.choice((-1.0, 1.0)) * 10.0 ** rng.uniform(
+                -300, 300)
+        path = tmp_path / f"fuzz{k}.json"
+        path.write_text(json.dumps(dict(obj, curves=curves.tolist())))
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", RuntimeWarning)           # a numpy warning fails the run
+            rc = main(recognize(path))
+        captured = capfd.readouterr()
+        lines = captured.err.strip().splitlines()
+        assert rc in outcomes, (k, captured.err)
+        assert (rc == 0 and not lines) or (rc == 2 and len(lines) == 1 and lines[0].startswith("tactrec: ")), \
+            (k, captured.err)
+        outcomes[rc] += 1
+    assert outcomes[0] >= 5 and outcomes[2] >= 100

@@ -30,6 +30,7 @@ from .methods import DEFAULT_METHOD, get_method
 from .probability import AMBIGUOUS, UNKNOWN_PRIOR, Evidence, evidence, fit_limit, residuals
 from .registration.result import Registration
 from .tables import CurvatureTable
+from .units import conversion
 
 __all__ = ["Recognition", "Recognizer", "recognize", "ModelEntry", "default_workers"]
 
@@ -151,6 +152,25 @@ class Recognition:
             "settled": self.settled,
             "seconds": round(self.seconds, 4),
         }
+
+
+#: a touch this many times larger than every model, or smaller than every one, is in the wrong units
+OFF_SCALE = 1000.0
+
+
+def _check_scale(data: TactileData, models) -> None:
+    """Refuse, before any arithmetic on it, a touch whose extent (in each model's units) is more than
+    :data:`OFF_SCALE` times every model's size, or less than every model's size over it."""
+    points = data.points
+    extent = float(np.max(points.max(axis=0) - points.min(axis=0)))
+    ratios = [extent * conversion(data.units, getattr(e.model, "units", None)) / e.model.size for e in models]
+    if not ratios or OFF_SCALE ** -1 <= max(ratios) and min(ratios) <= OFF_SCALE:
+        return
+    sizes = [e.model.size for e in models]
+    where = f"over {OFF_SCALE:g} times" if min(ratios) > OFF_SCALE else f"under 1/{OFF_SCALE:g} of"
+    model_units = getattr(models[0].model, "units", None) or "units"
+    raise InputError(f"the touch spans {extent:.3g} {data.units or 'units'}, {where} every model's size "
+                     f"({min(sizes):.3g}-{max(sizes):.3g} {model_units}): are its units right?", data.source)
 
 
 #: on noise-free data a fit is within this fraction of the touch's radius, for a method without a ``floor`` of its own
@@ -320,6 +340,7 @@ class Recognizer:
         searched.  ``budget``: the most work (closest-point queries) the search may spend in all, when
         lower than the method's own budget; the first round runs whatever it costs."""
         start = time.perf_counter()
+        _check_scale(data, self.models)
         touch = Touch.from_data(data, **self.estimation)
         if len(context):
             touch = touch.with_context(context, fit=fit)

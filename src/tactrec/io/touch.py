@@ -69,15 +69,14 @@ class TactileData:
             raise InputError("'curves' must be a list of curves", source)
         if len(curves) < MIN_CURVES:
             raise InputError(f"needs at least {MIN_CURVES} curves, got {len(curves)}", source)
-        arrays = []
-        for i, c in enumerate(curves):
-            arr = _points(c, f"curve {i + 1}", source)
+        arrays = [_points(c, f"curve {i + 1}", source) for i, c in enumerate(curves)]
+        for i, arr in enumerate(arrays):
             if len(arr) < MIN_POINTS:
                 raise InputError(f"curve {i + 1} has {len(arr)} points; at least {MIN_POINTS} are needed", source)
-            steps = np.linalg.norm(np.diff(arr, axis=0), axis=1)
-            if np.all(steps == 0) or np.ptp(arr, axis=0).max() == 0:
+        _check_reach(arrays, source)
+        for i, arr in enumerate(arrays):
+            if np.ptp(arr, axis=0).max() == 0:
                 raise InputError(f"curve {i + 1} has all its points at one place", source)
-            arrays.append(arr)
         c = None if contact is None else _vector(contact, "contact", source)
         o = None if outward is None else _vector(outward, "outward", source)
         if o is not None:
@@ -131,6 +130,31 @@ class TactileData:
             out["tip_radius"] = self.tip_radius
         out.update(self.meta)
         return out
+
+
+#: no sensor records coordinates beyond this magnitude, nor a touch spanning less than its inverse, in any
+#: units (a thousand km in micrometres, a picometre in metres)
+MAX_COORDINATE = 1e12
+#: nor a touch farther from its frame's origin than this many times its own extent
+FAR = 1e6
+
+
+def _check_reach(arrays: list, source: str) -> None:
+    """Refuse, before any arithmetic on them, coordinates no sensor records: beyond
+    :data:`MAX_COORDINATE`, a touch spanning less than its inverse, or a touch more than :data:`FAR`
+    times its extent from its frame's origin (its shape would be lost in the coordinates' rounding)."""
+    reach = max(float(np.max(np.abs(a))) for a in arrays)
+    if reach > MAX_COORDINATE:
+        raise InputError(f"coordinates reach {reach:.3g}: no sensor records beyond {MAX_COORDINATE:.0e} in any "
+                         "units", source)
+    points = np.concatenate(arrays)
+    extent = float(np.max(points.max(axis=0) - points.min(axis=0)))
+    if 0 < extent < 1.0 / MAX_COORDINATE:
+        raise InputError(f"the touch spans {extent:.3g}: no sensor records under {1.0 / MAX_COORDINATE:.0e} in any "
+                         "units", source)
+    if extent > 0 and reach > FAR * extent:
+        raise InputError(f"the touch spans {extent:.3g} but lies {reach:.3g} from its frame's origin (more than "
+                         f"{FAR:.0e} times its extent): these are not a sensor's coordinates", source)
 
 
 def _points(obj, what: str, source: str) -> np.ndarray:
