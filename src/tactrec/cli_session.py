@@ -1,4 +1,4 @@
-"""The ``tactrec`` command's sessions: ``recognize SESSION`` and ``next SESSION`` (INTERFACE.md)."""
+"""The ``tactrec`` command's sessions: ``recognize SESSION`` and ``next SESSION`` (docs/formats.md)."""
 
 from __future__ import annotations
 

@@ -106,7 +106,7 @@ class Recognition:
 
     @property
     def unknown(self) -> float:
-        """The probability that the data came from none of the models (INTERFACE.md, Probabilities)."""
+        """The probability that the data came from none of the models (docs/formats.md)."""
         return self._outcomes[1]
 
     @property
@@ -117,7 +117,7 @@ class Recognition:
     @property
     def ambiguous(self) -> bool:
         """True exactly when :attr:`confidence` is below :data:`~tactrec.probability.AMBIGUOUS`
-        (INTERFACE.md); False when every model was rejected.  A search that ended on its budget
+        (docs/formats.md); False when every model was rejected.  A search that ended on its budget
         says so in :attr:`settled`."""
         if self.best is None:
             return False
@@ -136,7 +136,7 @@ class Recognition:
         return self.ranking[0] if self.ranking and self.ranking[0].ok else None
 
     def to_json(self) -> dict:
-        """The result of INTERFACE.md (``tactrec recognize --json``)."""
+        """The result of docs/formats.md (``tactrec recognize --json``)."""
         return {
             "best": self.best,
             "ranking": [dict(r.to_json(), probability=self.probabilities[r.model]) if r.ok else r.to_json()

@@ -1,4 +1,4 @@
-"""Session files: several touches of one still object, in one world frame (INTERFACE.md).
+"""Session files: several touches of one still object, in one world frame (docs/formats.md).
 
 A session is JSON with ``touches``, each a tactile data object (``curves``,
 optional ``contact``, ``outward``, ``units``) in its sensor's frame, with an
@@ -73,7 +73,7 @@ class SessionTouch:
 @dataclasses.dataclass(frozen=True)
 class MissedLine:
     """A line the sensor followed from ``start`` along ``direction`` (unit) for ``length`` without
-    meeting anything (INTERFACE.md, Where to touch next)."""
+    meeting anything (docs/formats.md, Where to touch next)."""
 
     start: np.ndarray
     direction: np.ndarray

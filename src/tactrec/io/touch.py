@@ -1,6 +1,6 @@
 """Tactile data: three or more planar curves meeting at one point (Section 3.1).
 
-Files (INTERFACE.md): JSON with ``curves``, optional ``contact``, ``outward``,
+Files (docs/formats.md): JSON with ``curves``, optional ``contact``, ``outward``,
 ``units``; or CSV with the header ``curve,x,y,z``.  Everything is validated
 here, at the boundary, and a problem is reported as one
 :class:`~tactrec.errors.InputError` naming the file and what is wrong.

@@ -1,6 +1,6 @@
 """Lines the sensor followed without meeting anything: evidence against the poses they cut through.
 
-A touch whose approach line met nothing (INTERFACE.md, ``"missed"``) says the
+A touch whose approach line met nothing (docs/formats.md, ``"missed"``) says the
 object's surface does not cross that line.  Under a hypothesis (a model at
 its joint pose), the line is sampled every half of the touches' median point
 spacing, mapped into the model's frame, and its deepest point inside the

@@ -91,7 +91,7 @@ class SessionResult:
 
     @property
     def best(self) -> str | None:
-        """The most probable model (INTERFACE.md): the first by error unless a missed line or a touch its
+        """The most probable model (docs/formats.md): the first by error unless a missed line or a touch its
         pose fits worst has taken another's probability past it."""
         if not self.ranking:
             return None
@@ -110,7 +110,7 @@ class SessionResult:
 
     @property
     def unknown(self) -> float:
-        """The probability that the object is none of the models (INTERFACE.md, Probabilities)."""
+        """The probability that the object is none of the models (docs/formats.md)."""
         return self._outcomes[1]
 
     @property
@@ -138,7 +138,7 @@ class SessionResult:
         return out
 
     def to_json(self) -> dict:
-        """INTERFACE.md's result for a session (``rotation``/``translation`` map the world onto each model)."""
+        """docs/formats.md's result for a session (``rotation``/``translation`` map the world onto each model)."""
         p = self.probabilities
         g = self.estimate
         ranking = [h.to_json(p.get(h.model), None if g is None else g.contact) for h in self.ranking]

@@ -1,6 +1,6 @@
 """Closed-form surfaces: a parametrisation sigma(u, v) and an implicit f = 0 (Section 4).
 
-A surface is declared in a TOML file (see INTERFACE.md)::
+A surface is declared in a TOML file (see docs/formats.md)::
 
     name = "torus"
     units = "mm"                       # optional
