@@ -613,7 +613,7 @@ def test_absurd_coordinates_are_refused_before_arithmetic(tmp_path, capsys):
 
     bad(capsys, recognize(written("huge.json", lambda p: [x * 1e200 for x in p])), "huge.json", "beyond 1e+12")
     bad(capsys, recognize(written("far.json", lambda p: [x + 1e9 for x in p])), "far.json", "from its frame's origin")
-    bad(capsys, recognize(written("speck.json", lambda p: [x * 1e-20 for x in p])), "speck.json", "spans")
+    bad(capsys, recognize(written("speck.json", lambda p: [x * 1e-20 for x in p])), "speck.json", "under 1e-12")
     bad(capsys, recognize(written("large.json", lambda p: [x * 1e7 for x in p])), "large.json", "are its units right")
     bad(capsys, recognize(written("small.json", lambda p: [x * 1e-7 for x in p])), "small.json", "are its units right")
 
@@ -647,3 +647,49 @@ def test_fuzzed_magnitudes_give_a_result_or_one_line(tmp_path, capfd):
             (k, captured.err)
         outcomes[rc] += 1
     assert outcomes[0] >= 5 and outcomes[2] >= 100
+
+
+@pytest.mark.parametrize("field, value", [
+    ("contact", [1e300, 0.0, 0.0]), ("outward", [1e300, 1.0, 0.0]), ("tip_radius", 10 ** 400),
+    ("curves", "integers"), ("contact", [10 ** 400, 0, 0]),
+])
+def test_absurd_fields_are_one_line(tmp_path, capfd, field, value):
+    """A contact, outward hint or tip radius beyond any sensor's reach, and whole numbers too large for
+    a float, are one line naming the file (no warning, no traceback)."""
+    obj = json.loads(simulate_ok(tmp_path).read_text())
+    if value == "integers":
+        obj["curves"][1][3] = [10 ** 400, 0, 0]
+    else:
+        obj[field] = value
+    path = tmp_path / "absurd.json"
+    path.write_text(json.dumps(obj))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        rc = main(recognize(path))
+    lines = capfd.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(lines) == 1 and "absurd.json" in lines[0], lines
+
+
+@pytest.mark.parametrize("change", ["translation", "rotation", "missed start", "missed length"])
+def test_absurd_session_poses_and_lines_are_one_line(tmp_path, capfd, change):
+    """A session whose sensor2world puts a touch beyond any sensor's reach, whose rotation is no
+    rotation, or whose missed line starts or runs absurdly far, is one line naming the file."""
+    obj = json.loads(simulate_ok(tmp_path).read_text())
+    pose = {"rotation": [[1, 0, 0], [0, 1, 0], [0, 0, 1]], "translation": [0, 0, 0]}
+    missed = {"start": [0, 0, 0], "direction": [0, 0, 1], "length": 1.0}
+    if change == "translation":
+        pose["translation"] = [1e200, 0, 0]
+    elif change == "rotation":
+        pose["rotation"] = [[1e300, 0, 0], [0, 1, 0], [0, 0, 1]]
+    elif change == "missed start":
+        missed["start"] = [1e300, 0, 0]
+    else:
+        missed["length"] = 10 ** 400
+    touches = [dict(obj, sensor2world=pose), {"missed": missed}]
+    path = tmp_path / "session.json"
+    path.write_text(json.dumps({"touches": touches}))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        rc = main(["recognize", str(path), "--models", "monkey-saddle", "--quiet"])
+    lines = capfd.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(lines) == 1 and "session.json" in lines[0], lines

@@ -38,7 +38,13 @@ def _radial(data):
 
 
 def test_a_perfect_sensor_changes_nothing(sphere, mug):
-    """Imperfections() gives the same bits as no imperfections, on a closed-form surface and a mesh."""
+    """Imperfections() gives the same bits as no imperfections, on a closed-form surface and a mesh,
+    and a perfect touch is the one this package simulated before it modelled a sensor (seeded
+    points of a noisy sphere touch, to 1e-9)."""
+    d = simulate_random_touch(sphere, rng=0, points=21, spacing=0.3, noise=0.02, noise_kind="gaussian", contact=True)
+    assert np.allclose(d.curves[0][0], [52.273511444717, 88.854420868828, -18.647152337466], atol=1e-9)
+    assert np.allclose(d.curves[2][-1], [53.367155741613, 91.014872445293, -20.280374386687], atol=1e-9)
+    assert np.allclose(d.contact, [55.01498304158, 89.831850655782, -18.073554108107], atol=1e-9)
     for model in (sphere, mug):
         for k in range(3):
             a = simulate_random_touch(model, rng=k, points=21, spacing=0.3, noise=0.02, noise_kind="gaussian")
@@ -101,10 +107,16 @@ def test_strokes_that_miss_the_contact_or_bend(sphere):
     """With ``miss`` 0.3 each curve passes 0.3 from the contact (within 2%) and the curves no longer
     meet; with ``bend`` 0.2 each stroke leaves its best plane by 0.05-0.1 (0.4 bend) at its ends; both stay on
     the surface."""
+    from tactrec.io.meeting import closest_on_polyline, find_contact
+
     for data in _touches(sphere, Imperfections(miss=0.3), count=12):
         contact = np.asarray(data.meta["truth"]["contact"])
         nearest = [np.min(np.linalg.norm(c - contact, axis=1)) for c in data.curves]
         assert np.allclose(nearest, 0.3, rtol=0.02)
+        # no point lies on all three: 60 degrees apart, each 0.3 to either side, they miss their
+        # least-squares point by at least 0.3 / 3 (the offsets' alternating sum, shared by three)
+        meet = find_contact(data.curves)
+        assert max(np.linalg.norm(closest_on_polyline(meet[None], c)[0] - meet) for c in data.curves) > 0.09
         assert all(np.allclose(r, 0.0, atol=1e-9) for r in _radial(data))
     for data in _touches(sphere, Imperfections(bend=0.2), count=12):
         for c in data.curves:

@@ -236,7 +236,9 @@ def cmd_simulate(args) -> int:
     save_touch(data, args.out)
     if not args.quiet:
         t = data.meta["truth"]
-        print(f"{args.out}: {len(data.curves)} curves x {len(data.curves[0])} points on {model.name} at "
+        counts = sorted({len(c) for c in data.curves})
+        print(f"{args.out}: {len(data.curves)} curves x {'-'.join(str(n) for n in counts[::max(len(counts) - 1, 1)])} "
+              f"points on {model.name} at "
               f"({', '.join(f'{x:.4g}' for x in t['contact'])}), spacing {spacing:.4g}")
     return 0
 

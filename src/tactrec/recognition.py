@@ -167,10 +167,12 @@ def _check_scale(data: TactileData, models) -> None:
     if not ratios or OFF_SCALE ** -1 <= max(ratios) and min(ratios) <= OFF_SCALE:
         return
     sizes = [e.model.size for e in models]
+    span = f"{min(sizes):.3g}" if min(sizes) == max(sizes) else f"{min(sizes):.3g}-{max(sizes):.3g}"
     where = f"over {OFF_SCALE:g} times" if min(ratios) > OFF_SCALE else f"under 1/{OFF_SCALE:g} of"
-    model_units = getattr(models[0].model, "units", None) or "units"
+    kinds = {getattr(e.model, "units", None) for e in models}
+    model_units = (kinds.pop() or "units") if len(kinds) == 1 else "in their own units"
     raise InputError(f"the touch spans {extent:.3g} {data.units or 'units'}, {where} every model's size "
-                     f"({min(sizes):.3g}-{max(sizes):.3g} {model_units}): are its units right?", data.source)
+                     f"({span} {model_units}): are its units right?", data.source)
 
 
 #: on noise-free data a fit is within this fraction of the touch's radius, for a method without a ``floor`` of its own

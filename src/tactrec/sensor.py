@@ -42,6 +42,8 @@ import dataclasses
 
 import numpy as np
 
+from .io.touch import MIN_POINTS
+
 __all__ = ["Imperfections", "record"]
 
 #: a curve is sampled this many times more finely than the touch's spacing before it is resampled
@@ -161,6 +163,8 @@ def record(model, frame, tangents: np.ndarray, *, spacing: float, points: int, i
             curve = _on_surface(model, curve + imp.bend * (s * s * s)[:, None] * side)
         if imp.uneven > 1.0:
             curve = _on_surface(model, _resampled(curve, centre, spacing, imp.uneven, rng))
+            if len(curve) < MIN_POINTS:
+                raise ValueError(f"uneven steps left a curve {len(curve)} points: ask for more points")
         else:
             curve = curve[::fine]
         if imp.tip_radius > 0:

@@ -18,6 +18,7 @@ import dataclasses
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from .errors import InputError
 from .io.touch import TactileData
 from .sensor import Imperfections, record
 from .surfaces.base import SurfaceModel
@@ -104,7 +105,7 @@ def simulate_touch(model: SurfaceModel, site, *, points: int = 61, spacing: floa
     tip = imperfections.tip_radius if imperfect else 0.0
     data = TactileData.from_arrays(sections, contact=frame.point + tip * frame.normal if contact else None,
                                    outward=frame.normal if outward else None, units=units or model.units,
-                                   tip_radius=tip)
+                                   tip_radius=tip, source=f"<simulated {model.name}>")
     if sensor_frame:
         R, t = random_rigid_motion(rng, extent=model.size)
         data = data.transformed(R, t)
@@ -113,7 +114,8 @@ def simulate_touch(model: SurfaceModel, site, *, points: int = 61, spacing: floa
     else:
         truth["rotation"] = np.eye(3).tolist()
         truth["translation"] = [0.0, 0.0, 0.0]
-    truth.update(points=points, spacing=spacing, angle=angle, noise=noise, noise_kind=noise_kind)
+    truth.update(points=points if not imperfect else [len(c) for c in sections], spacing=spacing, angle=angle,
+                 noise=noise, noise_kind=noise_kind)
     if imperfect:
         truth["imperfections"] = imperfections.to_json() | done
     meta = {"truth": truth}
@@ -134,6 +136,8 @@ def simulate_random_touch(model: SurfaceModel, *, rng=None, attempts: int = 200,
             site = model.random_sites(1, rng=rng)[0]
         try:
             return simulate_touch(model, site, rng=rng, **options)
+        except InputError:
+            raise                                          # data no place could make valid: not the site's fault
         except ValueError as exc:
             last = exc
     raise ValueError(f"no touch on {model.name} stayed on the surface in {attempts} attempts ({last})")

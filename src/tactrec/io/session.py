@@ -24,7 +24,7 @@ import numpy as np
 from ..errors import InputError
 from .atomic import write_text_atomic
 from .meeting import check_meeting
-from .touch import TactileData, _parse_json, _read_text, _vector, load_touch
+from .touch import TactileData, _check_reach, _parse_json, _read_text, _vector, load_touch, number
 
 __all__ = ["SessionTouch", "SessionMiss", "MissedLine", "load_session", "save_session", "is_session_file",
            "rigid_pose"]
@@ -35,10 +35,12 @@ def rigid_pose(rotation, translation, source: str, what: str = "sensor2world") -
     and ``translation`` three finite numbers.  Returns them as arrays."""
     try:
         R = np.array(rotation, dtype=np.float64)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise InputError(f"'{what}' rotation must be a 3 x 3 array of numbers", source) from None
     if R.shape != (3, 3) or not np.isfinite(R).all():
         raise InputError(f"'{what}' rotation must be a 3 x 3 array of finite numbers", source)
+    if np.max(np.abs(R)) > 2.0:
+        raise InputError(f"'{what}' rotation is not a rotation (an entry reaches {np.max(np.abs(R)):.3g})", source)
     if np.max(np.abs(R @ R.T - np.eye(3))) > 1e-6 or np.linalg.det(R) < 0:
         raise InputError(f"'{what}' rotation is not a rotation (orthonormal, determinant +1)", source)
     return R, _vector(translation, f"{what} translation", source)
@@ -89,10 +91,10 @@ class MissedLine:
         norm = float(np.linalg.norm(direction))
         if norm <= 1e-12:
             raise InputError("'missed' direction has no length", source)
-        length = obj["length"]
-        if isinstance(length, bool) or not isinstance(length, (int, float)) or not np.isfinite(length) or length <= 0:
-            raise InputError(f"'missed' length must be a positive number (got {length!r})", source)
-        return cls(start, direction / norm, float(length))
+        length = number(obj["length"], "missed length", source)
+        if length <= 0:
+            raise InputError(f"'missed' length must be a positive number (got {length:g})", source)
+        return cls(start, direction / norm, length)
 
     def transformed(self, rotation: np.ndarray, translation: np.ndarray) -> "MissedLine":
         """The line under ``x -> rotation @ x + translation``."""
@@ -176,6 +178,7 @@ def load_session(path: str | os.PathLike) -> list:
             out.append(SessionMiss(MissedLine.parse(item["missed"], source), R, t, item.get("units")))
             continue
         data = _parse_json(json.dumps(item), source)
+        _check_reach([c @ R.T + t for c in data.curves], source)          # in the world frame too
         check_meeting(data)
         out.append(SessionTouch(data, R, t))
     if not any(isinstance(t, SessionTouch) for t in out):

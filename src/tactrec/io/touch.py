@@ -89,10 +89,10 @@ class TactileData:
                 unit_scale(units)
             except ValueError as exc:
                 raise InputError(str(exc), source) from None
-        if isinstance(tip_radius, bool) or not isinstance(tip_radius, (int, float, np.floating, np.integer)) \
-                or not math.isfinite(tip_radius) or tip_radius < 0:
+        tip = number(tip_radius, "tip_radius", source)
+        if tip < 0:
             raise InputError(f"'tip_radius' must be a non-negative number (got {tip_radius!r})", source)
-        return cls(tuple(arrays), c, o, units, dict(meta or {}), source, float(tip_radius))
+        return cls(tuple(arrays), c, o, units, dict(meta or {}), source, tip)
 
     @property
     def points(self) -> np.ndarray:
@@ -162,7 +162,7 @@ def _points(obj, what: str, source: str) -> np.ndarray:
         raise InputError(f"{what} must be a list of [x, y, z] points", source)
     try:
         arr = np.array(obj, dtype=np.float64)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise InputError(f"{what} must be a list of [x, y, z] numbers", source) from None
     if arr.ndim != 2 or arr.shape[1] != 3:
         raise InputError(f"{what} must be a list of [x, y, z] points (got shape {arr.shape})", source)
@@ -173,15 +173,32 @@ def _points(obj, what: str, source: str) -> np.ndarray:
 
 
 def _vector(obj, what: str, source: str) -> np.ndarray:
+    """Three finite numbers, each within :data:`MAX_COORDINATE`."""
     try:
         arr = np.array(obj, dtype=np.float64)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise InputError(f"'{what}' must be [x, y, z] numbers", source) from None
     if arr.shape != (3,):
         raise InputError(f"'{what}' must be [x, y, z] (got {obj!r})", source)
     if not np.isfinite(arr).all():
         raise InputError(f"'{what}' is not finite ({arr.tolist()})", source)
+    if np.max(np.abs(arr)) > MAX_COORDINATE:
+        raise InputError(f"'{what}' reaches {np.max(np.abs(arr)):.3g}: no sensor records beyond "
+                         f"{MAX_COORDINATE:.0e} in any units", source)
     return arr
+
+
+def number(obj, what: str, source: str) -> float:
+    """A finite number within :data:`MAX_COORDINATE` (not a bool), as a float."""
+    try:
+        if isinstance(obj, bool) or not isinstance(obj, (int, float, np.floating, np.integer)):
+            raise TypeError
+        value = float(obj)
+    except (TypeError, OverflowError):
+        raise InputError(f"'{what}' must be a number (got {str(obj)[:40]})", source) from None
+    if not math.isfinite(value) or abs(value) > MAX_COORDINATE:
+        raise InputError(f"'{what}' must be a finite number within {MAX_COORDINATE:.0e} (got {value:.3g})", source)
+    return value
 
 
 def _read_text(path: Path) -> str:
