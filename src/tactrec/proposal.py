@@ -162,10 +162,7 @@ def _predicted(model, h, contact_w: np.ndarray, directions_w: np.ndarray, *, poi
     d = np.asarray(directions_w, dtype=np.float64) @ R.T
     d = d / np.linalg.norm(d, axis=1, keepdims=True)
     offsets = (np.arange(points) - (points - 1) / 2.0) * spacing * s
-    x = (c[None, None, :] + offsets[None, :, None] * d[:, None, :]).reshape(-1, 3)
-    for _ in range(2):
-        dist, normals = model.planes(x)
-        x = x - np.asarray(dist)[:, None] * np.asarray(normals)
+    x = model.projected((c[None, None, :] + offsets[None, :, None] * d[:, None, :]).reshape(-1, 3))
     advancing = np.linalg.norm(np.diff(x.reshape(len(d), points, 3), axis=1), axis=2) >= 0.25 * spacing * s
     centre = (points - 1) // 2                              # the run of advancing steps about the contact
     kept = np.ones((len(d), points), dtype=bool)

@@ -103,14 +103,6 @@ class Imperfections:
         return dataclasses.asdict(self) | {"outlier_size": list(self.outlier_size)}
 
 
-def _on_surface(model, x: np.ndarray) -> np.ndarray:
-    """Points ``(n, 3)`` moved onto the surface (two closest-point passes along the planes' normals)."""
-    for _ in range(2):
-        dist, normals = model.planes(x)
-        x = x - np.asarray(dist)[:, None] * np.asarray(normals)
-    return x
-
-
 def _resampled(curve: np.ndarray, centre: int, spacing: float, ratio: float, rng) -> np.ndarray:
     """Points along the polyline ``curve (n, 3)`` at steps uniform in ``[a, ratio a]`` (mean ``spacing``)
     from its point ``centre`` outwards both ways, up to its ends."""
@@ -160,9 +152,9 @@ def record(model, frame, tangents: np.ndarray, *, spacing: float, points: int, i
             side = np.cross(tangent, normal)
             side = side / np.linalg.norm(side) * rng.choice((-1.0, 1.0))
             s = (np.arange(fine_count) - centre) / centre
-            curve = _on_surface(model, curve + imp.bend * (s * s * s)[:, None] * side)
+            curve = model.projected(curve + imp.bend * (s * s * s)[:, None] * side)
         if imp.uneven > 1.0:
-            curve = _on_surface(model, _resampled(curve, centre, spacing, imp.uneven, rng))
+            curve = model.projected(_resampled(curve, centre, spacing, imp.uneven, rng))
             if len(curve) < MIN_POINTS:
                 raise ValueError(f"uneven steps left a curve {len(curve)} points: ask for more points")
         else:

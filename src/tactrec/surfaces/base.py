@@ -88,6 +88,16 @@ class SurfaceModel(abc.ABC):
         step linearises (:mod:`tactrec.registration.solver`).  Not finite where the surface gives
         no plane."""
 
+    def projected(self, points: np.ndarray, passes: int = 2) -> np.ndarray:
+        """``points (n, 3)`` moved onto the surface: ``passes`` steps along the planes' normals by
+        their signed distances (:meth:`planes`; closest points, to well within a facet's or the
+        implicit function's error after two)."""
+        x = np.asarray(points, dtype=np.float64)
+        for _ in range(passes):
+            dist, normals = self.planes(x)
+            x = x - np.asarray(dist)[:, None] * np.asarray(normals)
+        return x
+
     @abc.abstractmethod
     def site_frame(self, site: np.ndarray) -> SiteFrame:
         """Point, outward normal and tangent frame at a site."""
