@@ -75,7 +75,7 @@ from scipy.special import erf
 
 from .io.session import MissedLine
 from .registration.solver import jacobian
-from .session.lines import first_hit, miss_excess
+from .session.lines import crossing, depth_excess
 from .session.result import LEADING, MASS
 
 __all__ = ["Proposal", "propose", "MASS", "LEADING", "STANDOFF", "CANDIDATES"]
@@ -303,14 +303,16 @@ def propose(session, *, radius: float, angle: float = 60.0, candidates: int = CA
 
 
 def _outcome(model, pose, line, directions, *, step: float, points: int, spacing: float):
-    """What ``line`` gives under ``pose``: ``("miss", None, None)``, ``("hit", (points (k, 3), kept (k,)), hit)``
-    (the touch predicted where it meets the surface, at world point ``hit``: :func:`_predicted`), or
-    ``(None, None, hit)`` where the surface there will not take the touch."""
-    hit = first_hit(model, pose, line, step)
+    """What ``line`` gives under ``pose``, and how far it cuts into its surface (world units,
+    :func:`tactrec.session.lines.crossing`): ``("miss", None, None, depth)``,
+    ``("hit", (points (k, 3), kept (k,)), hit, depth)`` (the touch predicted where it meets the
+    surface, at world point ``hit``: :func:`_predicted`), or ``(None, None, hit, depth)`` where the
+    surface there will not take the touch."""
+    hit, depth = crossing(model, pose, line, step)
     if hit is None:
-        return "miss", None, None
+        return "miss", None, None, depth
     x = _predicted(model, pose, hit, directions, points=points, spacing=spacing)
-    return ("hit" if x is not None else None), x, hit
+    return ("hit" if x is not None else None), x, hit, depth
 
 
 def _best_line(session, leading: list, weights: np.ndarray, *, radius: float, angle: float, candidates: int, rng):
@@ -371,7 +373,7 @@ def _best_line(session, leading: list, weights: np.ndarray, *, radius: float, an
             z = np.zeros((len(poses), len(leading)))                    # (truth pose, model fitted)
             missing = (kinds == "miss")
             if missing.any():                # a truth that meets nothing: each model by its pose the line cuts least
-                cut = miss_excess(models, poses, [line], step=spacing, limit=limit)[:, 0]
+                cut = depth_excess([o[3] for o in outcomes], limit)
                 for k in range(len(leading)):
                     z[missing & (owner != k), k] = cut[owner == k].min()
             if hits.any():

@@ -22,38 +22,49 @@ import numpy as np
 
 from ..probability import CONSISTENT_SE, residuals
 
-__all__ = ["cut_depth", "miss_excess", "first_hit"]
+__all__ = ["crossing", "cut_depth", "depth_excess", "miss_excess", "first_hit"]
+
+
+def crossing(model, hypothesis, line, step: float) -> tuple[np.ndarray | None, float]:
+    """Where ``line`` (:class:`~tactrec.io.session.MissedLine`, world frame) first meets ``model``'s
+    surface under ``hypothesis`` (``model = s R world + t``) and how far it cuts into it, from one
+    pass over the line sampled every ``step``: ``(hit, depth)``.  ``hit`` (world frame) is the first
+    sample inside the surface, interpolated linearly in signed distance from the sample before (the
+    start where it starts inside; None where it meets nothing); ``depth`` (world units) is how far
+    the deepest sample lies inside, 0 outside."""
+    x = line.points(step)
+    d = residuals(model, hypothesis.rotation, hypothesis.translation, x, hypothesis.scale)
+    finite = d[np.isfinite(d)]                # a closed-form surface's distance is undefined where its gradient is 0
+    depth = float(max(0.0, -finite.min())) if len(finite) else 0.0
+    inside = np.nonzero(d <= 0.0)[0]
+    if len(inside) == 0:
+        return None, depth
+    i = int(inside[0])
+    if i == 0:
+        return x[0], depth
+    f = d[i - 1] / (d[i - 1] - d[i])
+    return x[i - 1] + f * (x[i] - x[i - 1]), depth
 
 
 def cut_depth(model, hypothesis, line, step: float) -> float:
-    """How far (world units) ``line`` (:class:`~tactrec.io.session.MissedLine`, world frame) cuts into
-    ``model`` under ``hypothesis`` (``model = s R world + t``), sampled every ``step``; 0 outside."""
-    d = residuals(model, hypothesis.rotation, hypothesis.translation, line.points(step), hypothesis.scale)
-    d = d[np.isfinite(d)]                     # a closed-form surface's distance is undefined where its gradient is 0
-    return float(max(0.0, -d.min())) if len(d) else 0.0
+    """How far (world units) ``line`` cuts into ``model`` under ``hypothesis`` (:func:`crossing`)."""
+    return crossing(model, hypothesis, line, step)[1]
+
+
+def depth_excess(depth, limit: float):
+    """A cut ``depth`` (world units) in the fit test's units (module text), against the touches' fit
+    ``limit``."""
+    return CONSISTENT_SE * np.asarray(depth, dtype=np.float64) / max(limit, 1e-300)
 
 
 def miss_excess(models: dict, hypotheses, lines, *, step: float, limit: float) -> np.ndarray:
     """Each hypothesis' excess ``(k, q)`` on each of ``q`` missed ``lines`` (module text): ``models``
     by name, ``step`` the sampling step and ``limit`` the touches' fit limit, world units."""
-    out = np.zeros((len(hypotheses), len(lines)))
-    for i, h in enumerate(hypotheses):
-        for j, line in enumerate(lines):
-            out[i, j] = CONSISTENT_SE * cut_depth(models[h.model], h, line, step) / max(limit, 1e-300)
-    return out
+    return depth_excess([[cut_depth(models[h.model], h, line, step) for line in lines] for h in hypotheses],
+                        limit).reshape(len(hypotheses), len(lines))
 
 
 def first_hit(model, hypothesis, line, step: float) -> np.ndarray | None:
-    """Where ``line`` (world frame) first meets ``model``'s surface under ``hypothesis``, world frame:
-    the first sample of the line (every ``step``) inside the surface, interpolated linearly in signed
-    distance from the sample before; the start where it starts inside; None where it meets nothing."""
-    x = line.points(step)
-    d = residuals(model, hypothesis.rotation, hypothesis.translation, x, hypothesis.scale)
-    inside = np.nonzero(d <= 0.0)[0]
-    if len(inside) == 0:
-        return None
-    i = int(inside[0])
-    if i == 0:
-        return x[0]
-    f = d[i - 1] / (d[i - 1] - d[i])
-    return x[i - 1] + f * (x[i] - x[i - 1])
+    """Where ``line`` (world frame) first meets ``model``'s surface under ``hypothesis``, world frame
+    (:func:`crossing`), or None where it meets nothing."""
+    return crossing(model, hypothesis, line, step)[0]
