@@ -225,7 +225,7 @@ def test_next_measures_a_difference_after_refitting_the_pose_the_touches_leave_f
     import trimesh
     from scipy import stats
 
-    from tactrec.proposal import _excess, _information, _separation
+    from tactrec.proposal.gain import excess, information, separation
     from tactrec.session import Hypothesis
     from tactrec.surfaces.mesh import MeshModel
 
@@ -235,28 +235,29 @@ def test_next_measures_a_difference_after_refitting_the_pose_the_touches_leave_f
     earlier = np.array([[x, y, 10.0] for x in g for y in g])                    # on the top face
     pose = np.concatenate([np.eye(3), np.zeros((3, 1))], axis=1)
     h = Hypothesis("box", np.eye(3), np.zeros(3), 1.0, 0.0, np.zeros(1), (True,))
-    H0 = _information(model, pose, 1.0, earlier)
+    H0 = information(model, pose, 1.0, earlier)
     z = np.linspace(-6.0, 6.0, 41)
     side = np.stack([np.full_like(z, 22.0), np.linspace(-3.0, 3.0, 41), z], axis=1)      # the side face, 2 mm out
     top = np.stack([np.linspace(-8.0, 8.0, 41), np.linspace(-4.0, 4.0, 41), np.full_like(z, 11.0)], axis=1)
     sigma = 0.05
-    slid, lifted = _separation(model, h, H0, np.stack([side, top]), sigma, len(earlier))
-    pinned = _separation(model, h, 1e12 * np.eye(6), side[None], sigma, len(earlier))[0]
+    slid, lifted = separation(model, h, H0, np.stack([side, top]), sigma, len(earlier))
+    pinned = separation(model, h, 1e12 * np.eye(6), side[None], sigma, len(earlier))[0]
     assert slid < 1.0 and lifted > 20.0 and pinned > 20.0
     a = np.array([0.0, 0.3, 1.0, 4.0]) * sigma
     folded = np.array([stats.foldnorm.mean(x / sigma, scale=sigma) for x in a])
-    assert np.allclose(_excess(a, sigma), folded - sigma * np.sqrt(2 / np.pi), atol=1e-12)
+    assert np.allclose(excess(a, sigma), folded - sigma * np.sqrt(2 / np.pi), atol=1e-12)
 
 
 def test_next_predicts_a_touch_up_to_the_edge_it_crosses():
-    """A predicted touch (tactrec.proposal._predicted) on a box's top face 3 mm from an edge, one
+    """A predicted touch (tactrec.proposal.predict.predicted) on a box's top face 3 mm from an edge, one
     curve across the edge: its points lie on the top face up to the edge and are predicted there,
     none past it; the curves along the face are predicted whole; at the edge itself the half on
     the face is; a touch whose curves keep less than KEPT of their points (across a 2 mm slab) is
     not predicted; a kept point's refit residual counts and a dropped one's does not."""
     import trimesh
 
-    from tactrec.proposal import KEPT, _predicted, _separation
+    from tactrec.proposal.gain import separation
+    from tactrec.proposal.predict import KEPT, predicted
     from tactrec.session import Hypothesis
     from tactrec.surfaces.mesh import MeshModel
 
@@ -264,25 +265,25 @@ def test_next_predicts_a_touch_up_to_the_edge_it_crosses():
     model = MeshModel(box.vertices, box.faces, name="box", units="mm")
     h = Hypothesis("box", np.eye(3), np.zeros(3), 1.0, 0.0, np.zeros(1), (True,))
     along = np.array([[0.0, 1.0, 0.0], [0.0, -1.0, 0.0], [1.0, 0.0, 0.0]])   # two along the edge, one across
-    x, kept = _predicted(model, h, np.array([17.0, 0.0, 10.0]), along, points=41, spacing=0.3)
+    x, kept = predicted(model, h, np.array([17.0, 0.0, 10.0]), along, points=41, spacing=0.3)
     x, kept = x.reshape(3, 41, 3), kept.reshape(3, 41)
     assert kept[:2].all() and np.allclose(x[:2, :, 2], 10.0, atol=1e-9)
     across = x[2][kept[2]]
     assert np.all(across[:, 0] <= 20.0 + 1e-9) and np.allclose(across[:, 2], 10.0, atol=1e-9)
     assert 30 <= kept[2].sum() <= 31 and kept[2, :20].all()          # 3 mm to the edge: 10 steps, 0.3 mm apart
-    half = _predicted(model, h, np.array([20.0, 0.0, 10.0]), along, points=41, spacing=0.3)
+    half = predicted(model, h, np.array([20.0, 0.0, 10.0]), along, points=41, spacing=0.3)
     assert half is not None and half[1].reshape(3, 41)[2, :21].all()   # at the edge: the half on the face
     slab = trimesh.creation.box(extents=(40.0, 2.0, 20.0)).subdivide().subdivide()
     thin = MeshModel(slab.vertices, slab.faces, name="slab", units="mm")
     across = np.array([[0.0, 1.0, 0.0], [0.5, np.sqrt(0.75), 0.0], [-0.5, np.sqrt(0.75), 0.0]])
     assert 2.0 / 0.3 + 1 < KEPT * 41                                 # the slab's 2 mm top keeps 7 points of 41
-    assert _predicted(thin, h, np.array([0.0, 0.0, 10.0]), across, points=41, spacing=0.3) is None
+    assert predicted(thin, h, np.array([0.0, 0.0, 10.0]), across, points=41, spacing=0.3) is None
     off = np.stack([np.linspace(-5.0, 5.0, 41), np.zeros(41), np.full(41, 10.5)], axis=1)[None]
     part = np.zeros((1, 41), dtype=bool)
     part[0, :5] = True
     pinned = 1e12 * np.eye(6)
-    assert _separation(model, h, pinned, off, 0.05, 100, part)[0] > 3.0
-    assert _separation(model, h, pinned, off, 0.05, 100, part)[0] < _separation(model, h, pinned, off, 0.05, 100)[0]
+    assert separation(model, h, pinned, off, 0.05, 100, part)[0] > 3.0
+    assert separation(model, h, pinned, off, 0.05, 100, part)[0] < separation(model, h, pinned, off, 0.05, 100)[0]
 
 
 def test_next_proposes_the_widest_span_among_places_of_saturated_gain():

@@ -1,0 +1,76 @@
+"""How well a predicted touch would tell a session's hypotheses apart, in the probabilities' currency
+(:mod:`tactrec.proposal`, Gain)."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.special import erf
+
+from ..registration.solver import jacobian
+
+__all__ = ["entropy", "information", "refit", "excess", "separation"]
+
+
+def entropy(p: np.ndarray) -> float:
+    p = p[p > 1e-300]
+    return float(-np.sum(p * np.log2(p)))
+
+
+def _jacobian(model, moved: np.ndarray):
+    """Signed distances ``(m,)`` of model-frame points ``moved (m, 3)`` and their pose Jacobian
+    ``(m, 6)``: the change of each distance under a small turn ``w`` (per model size) and shift
+    ``u`` of the model frame, ``(m x n) . w + n . u``."""
+    d, n = model.planes(moved)
+    J = jacobian(moved, n)
+    J[:, :3] /= model.size
+    return d, J
+
+
+def information(model, pose: np.ndarray, scale: float, x_world: np.ndarray) -> np.ndarray:
+    """``J0^T J0 (6, 6)`` of world points ``x_world (m, 3)`` under ``pose (3, 4)``, model units."""
+    _, J = _jacobian(model, scale * x_world @ pose[:, :3].T + pose[:, 3])
+    return np.einsum("mi,mj->ij", J, J)
+
+
+def refit(model, pose: np.ndarray, scale: float, H0: np.ndarray, x_world: np.ndarray, kept: np.ndarray):
+    """Each of ``n`` predicted touches ``x_world (n, k, 3)`` against ``model`` once the pose
+    ``(3, 4)`` is refitted to that touch's predicted points (``kept (n, k)``, bool) and the earlier
+    touches (information ``H0 (6, 6)``) together, by one Gauss-Newton step (module text): the
+    touch's signed distances after the step ``(n, k)`` (0 where not predicted) and the sum of
+    squares the step adds to the earlier touches' ``(n,)``, world units."""
+    n, k = x_world.shape[:2]
+    r, J = _jacobian(model, (scale * x_world.reshape(-1, 3) @ pose[:, :3].T + pose[:, 3]))
+    r, J = r.reshape(n, k) * kept, J.reshape(n, k, 6) * kept[..., None]
+    H = H0[None] + np.einsum("nmi,nmj->nij", J, J)
+    b = np.einsum("nmi,nm->ni", J, r)
+    ridge = 1e-12 * np.maximum(np.trace(H, axis1=1, axis2=2), 1e-300)
+    step = -np.linalg.solve(H + ridge[:, None, None] * np.eye(6), b[..., None])[..., 0]
+    after = r + np.einsum("nmi,ni->nm", J, step)
+    return after / scale, np.einsum("ni,ij,nj->n", step, H0, step) / scale ** 2
+
+
+def excess(offset: np.ndarray, sigma: float) -> np.ndarray:
+    """What a point ``offset`` from the surface adds to a fit's mean distance under Gaussian noise of
+    ``sigma``: the folded normal's mean less the half-normal's (quadratic below ``sigma``, then
+    linear)."""
+    a = np.abs(offset)
+    with np.errstate(under="ignore"):
+        folded = sigma * np.sqrt(2.0 / np.pi) * np.exp(-0.5 * (a / sigma) ** 2) + a * erf(a / (sigma * np.sqrt(2.0)))
+    return folded - sigma * np.sqrt(2.0 / np.pi)
+
+
+def separation(model, h, H0: np.ndarray, predicted: np.ndarray, sigma: float, earlier: int,
+                kept: np.ndarray | None = None) -> np.ndarray:
+    """How many standard errors ``(n,)`` the session's mean distance on ``model``, refitted from
+    pose ``h`` (module text), would exceed the truth's if each of the ``predicted (n, k, 3)``
+    touches were added (their predicted points ``kept (n, k)``, bool; all by default): the points'
+    excess distances (:func:`excess`; the earlier touches' ``earlier`` points share the sum of
+    squares the refit adds to them) over the spread of a difference of two fits' mean distances
+    over all the points."""
+    kept = np.ones(predicted.shape[:2], dtype=bool) if kept is None else np.asarray(kept, dtype=bool)
+    pose = np.concatenate([h.rotation, h.translation[:, None]], axis=1)
+    offsets, added = refit(model, pose, h.scale, H0, predicted, kept)
+    total = kept.sum(axis=1) + earlier
+    extra = (excess(offsets, sigma) * kept).sum(axis=1) + earlier * excess(np.sqrt(added / earlier), sigma)
+    spread = sigma * np.sqrt(1.0 - 2.0 / np.pi)                      # a half-normal distance's
+    return extra / (spread * np.sqrt(2.0 * total))

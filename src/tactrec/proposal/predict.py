@@ -1,0 +1,82 @@
+"""What an approach line meets under a hypothesis' pose, and the touch the sensor would record there
+(:mod:`tactrec.proposal`)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..session.lines import crossing
+
+__all__ = ["KEPT", "DRAWS", "to_world", "to_model", "predicted", "reachable", "outcome"]
+
+#: a predicted curve is taken up to where the surface turns an edge, and must keep this share of its points
+KEPT = 0.25
+#: a hypothesis' surface is drawn at random up to this many times ``candidates`` for reachable places
+DRAWS = 50
+
+
+def to_world(h, x_model: np.ndarray) -> np.ndarray:
+    """Model points ``(..., 3)`` into the world under hypothesis ``h`` (``model = s R world + t``)."""
+    return ((x_model - h.translation) @ h.rotation) / h.scale
+
+
+def to_model(h, x_world: np.ndarray) -> np.ndarray:
+    return h.scale * (x_world @ h.rotation.T) + h.translation
+
+
+def predicted(model, h, contact_w: np.ndarray, directions_w: np.ndarray, *, points: int, spacing: float):
+    """The noise-free touch hypothesis ``h`` predicts at world point ``contact_w``, curves along the
+    world ``directions_w`` (each centred there): its points in the world ``(k, 3)`` and which of
+    them are predicted ``(k,)`` (bool), or None where the surface will not take the touch.  Each
+    curve is the chord along its direction, ``spacing`` between points, projected onto the surface
+    twice (closest points).  Where the projected points stop advancing (less than a quarter of
+    ``spacing`` apart: projected onto an edge) the surface turns a corner the projection cannot
+    follow: a curve is predicted over the run of points about the contact up to there, and a
+    touch whose curves keep less than :data:`KEPT` of their points each is not predicted.  On the
+    touches' scale this is their plane section to well within the noise, at the cost of one batch
+    of closest-point queries (a plane section of a mesh costs a pass over all its faces)."""
+    R, t, s = h.rotation, h.translation, h.scale
+    c = s * (np.asarray(contact_w, dtype=np.float64) @ R.T) + t
+    d = np.asarray(directions_w, dtype=np.float64) @ R.T
+    d = d / np.linalg.norm(d, axis=1, keepdims=True)
+    offsets = (np.arange(points) - (points - 1) / 2.0) * spacing * s
+    x = model.projected((c[None, None, :] + offsets[None, :, None] * d[:, None, :]).reshape(-1, 3))
+    advancing = np.linalg.norm(np.diff(x.reshape(len(d), points, 3), axis=1), axis=2) >= 0.25 * spacing * s
+    centre = (points - 1) // 2                              # the run of advancing steps about the contact
+    kept = np.ones((len(d), points), dtype=bool)
+    kept[:, centre + 1:] = np.cumprod(advancing[:, centre:], axis=1).astype(bool)
+    kept[:, :centre] = np.cumprod(advancing[:, :centre][:, ::-1], axis=1)[:, ::-1].astype(bool)
+    if not np.all(kept.sum(axis=1) >= KEPT * points):
+        return None
+    return ((x - t) @ R) / s, kept.reshape(-1)
+
+
+def reachable(model, h, contacts: np.ndarray, radius: float, count: int, rng) -> list:
+    """Up to ``count`` random places on ``model``'s surface that hypothesis ``h`` puts within ``radius``
+    of an earlier contact (world ``contacts (N, 3)``): ``(SiteFrame, world point)`` pairs, drawn
+    uniformly over the surface in batches until there are enough or :data:`DRAWS` x ``count`` were
+    drawn."""
+    out, drawn = [], 0
+    while len(out) < count and drawn < DRAWS * count:
+        for site in model.random_sites(4 * count, rng=rng):
+            frame = model.site_frame(site)
+            c = to_world(h, frame.point)
+            if np.min(np.linalg.norm(contacts - c, axis=1)) <= radius:
+                out.append((frame, c))
+                if len(out) >= count:
+                    break
+        drawn += 4 * count
+    return out
+
+
+def outcome(model, pose, line, directions, *, step: float, points: int, spacing: float):
+    """What ``line`` gives under ``pose``, and how far it cuts into its surface (world units,
+    :func:`tactrec.session.lines.crossing`): ``("miss", None, None, depth)``,
+    ``("hit", (points (k, 3), kept (k,)), hit, depth)`` (the touch predicted where it meets the
+    surface, at world point ``hit``: :func:`predicted`), or ``(None, None, hit, depth)`` where the
+    surface there will not take the touch."""
+    hit, depth = crossing(model, pose, line, step)
+    if hit is None:
+        return "miss", None, None, depth
+    x = predicted(model, pose, hit, directions, points=points, spacing=spacing)
+    return ("hit" if x is not None else None), x, hit, depth
