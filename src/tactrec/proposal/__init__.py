@@ -56,6 +56,22 @@ farthest from the earlier contacts among those its pose predicts to meet,
 its gain the entropy between the model and unknown (what the touch can
 settle).
 
+Locating.  The predictions above are only as good as the poses: where no
+leading hypothesis' pose fits every touch kept within the noise (the
+session's searches have not found the object's pose, or the object is none
+of the models), a line predicted from them tends to miss the object again
+and again.  What is known then is where the object is: at the touches'
+points.  The line proposed runs through the earlier touches' point farthest
+from every contact (so the new touch widens the touched span), along the
+most probable pose's outward normal there, :data:`STANDOFF` x ``radius``
+outside it and twice that far, so it meets the object at that point or
+before; the first curve runs away from the nearest contact.  The next
+touch's search, scored with the earlier touches, looks for the pose again.
+Its gain is not predicted: the proposal reports the entropy of the
+outcomes, ``unknown``'s included, the most a touch can settle.  Points
+whose line would start inside a leading hypothesis' surface are passed
+over.
+
 Choice.  The gain saturates: after one touch, most places that qualify
 separate the leading hypotheses at their poses completely, and their gains
 lie within a hundredth of a bit of the entropy.  It cannot see the other
@@ -153,10 +169,17 @@ def propose(session, *, radius: float, angle: float = 60.0, candidates: int = CA
     probs = result.probabilities
     leading = result.leading()
     hyps = [(h.model, probs.get(h.model, 0.0)) for h in leading]
+    if len(leading) < 2 and probs.get(leading[0].model, 0.0) >= MASS:
+        return Proposal(None, None, None, 0.0, hyps, "one hypothesis holds the probability: nothing to separate")
+    use = session.kept()
+    if not any(all(h.consistent[i] for i in use) for h in leading):
+        # no leading pose fits the touches: none predicts where the object is, the touches do
+        found = _locate(session, leading, radius=radius, angle=angle)
+        if found is not None:
+            rest = max(1.0 - sum(w for _, w in hyps), 0.0)
+            return Proposal(*found, entropy(np.array([w for _, w in hyps] + [rest])), hyps, approach=found[-1])
     if len(leading) < 2:
         sure = probs.get(leading[0].model, 0.0)
-        if sure >= MASS:
-            return Proposal(None, None, None, 0.0, hyps, "one hypothesis holds the probability: nothing to separate")
         # one model against unknown: a touch its pose predicts, as far from the others as reach allows
         confirm = _best_line(session, leading, np.ones(1), radius=radius, angle=angle, candidates=candidates,
                              rng=rng)
@@ -175,6 +198,41 @@ def propose(session, *, radius: float, angle: float = 60.0, candidates: int = CA
             return Proposal(contact, normal, directions, gain, hyps[:n], approach=line)
     return Proposal(None, None, None, 0.0, hyps, f"no approach line within {radius:g} of the touches whose outcome "
                     "the two leading hypotheses both predict")
+
+
+def _locate(session, leading: list, *, radius: float, angle: float):
+    """The approach line through an earlier touch's point (module text, Locating): ``(contact,
+    normal, directions, line)``, world frame, or None where every such line starts inside some
+    leading hypothesis' surface."""
+    models = {e.name: e.model for e in session.recognizer.models}
+    h = leading[0]
+    model = models[h.model]
+    x = np.concatenate([session.features[i].points for i in session.kept()])
+    contacts = np.array([w.contact if w.contact is not None else f.geometry.contact
+                         for w, f in zip(session.world, session.features)])
+    gap = np.linalg.norm(x[:, None, :] - contacts[None, :, :], axis=2)
+    order = np.argsort(-gap.min(axis=1), kind="stable")
+    _, n = model.planes(to_model(h, x[order]))
+    outward = n @ h.rotation                                                 # model -> world directions
+    outward = outward / np.linalg.norm(outward, axis=1, keepdims=True)
+    standoff = STANDOFF * radius
+    starts = x[order] + standoff * outward
+    inside = np.zeros(len(order), dtype=bool)
+    for g in leading:
+        inside |= models[g.model].planes(to_model(g, starts))[0] <= 0.0
+    if inside.all():
+        return None
+    k = int(np.argmax(~inside))                      # the farthest point whose line starts outside them all
+    p, normal = x[order[k]], outward[k]
+    away = p - contacts[np.argmin(gap[order[k]])]              # from the nearest contact, in the tangent plane
+    away = away - (away @ normal) * normal
+    if np.linalg.norm(away) <= 1e-12 * max(radius, 1.0):
+        away = np.cross(normal, np.eye(3)[np.argmin(np.abs(normal))])
+    t1 = away / np.linalg.norm(away)
+    t2 = np.cross(normal, t1)
+    angles = np.deg2rad(angle) * np.arange(3)
+    directions = np.cos(angles)[:, None] * t1 + np.sin(angles)[:, None] * t2
+    return p, normal, directions, MissedLine(starts[k], -normal, 2.0 * standoff)
 
 
 def _best_line(session, leading: list, weights: np.ndarray, *, radius: float, angle: float, candidates: int, rng):
