@@ -102,7 +102,7 @@ DRAWS = 3000
 def _code_hash(strategy: str) -> str:
     """The sources a strategy's sessions run: random places never ask for a proposal, so a change
     to :mod:`tactrec.proposal` reruns ``next``'s sessions alone."""
-    proposal = ("proposal.py",) if strategy == "next" else ()
+    proposal = ("proposal",) if strategy == "next" else ()
     return sources_hash(*CORE_SOURCES, "session", *proposal, "probability.py", "bench/multi_touch.py",
                         "bench/fast_vs_paper.py", "bench/scale.py")
 
