@@ -124,6 +124,49 @@ def test_next_proposes_an_approach_line_from_outside_every_hypothesis(small):
             assert set(proposal.to_json()["approach"]) == {"start", "direction", "length"}
 
 
+def test_next_sends_the_line_through_a_touched_point_when_no_pose_fits(small):
+    """Eight seeded one-touch sessions of the egg against a database of the brick and the ring alone,
+    whose poses cannot fit it: the line runs through the touch's point farthest from its contact
+    (the data say the object is there), starting outside every leading hypothesis' surface, so it
+    meets the egg itself, at that point or before; the first curve runs away from the contact and
+    the curves lie across the line."""
+    from tactrec.session import Hypothesis
+    from tactrec.session.lines import first_hit
+
+    egg = small[0]
+    models = {e.name: e.model for e in small}
+    located = 0
+    with Recognizer(small[2:]) as recognizer:
+        for k in range(8):
+            Rw, tw = random_rigid_motion(instance_rng(14, k), extent=300.0)
+            touch = simulate_random_touch(egg.model, rng=instance_rng(15, k), **dict(NOISY, points=31))
+            session = recognizer.session()
+            result = session.add(touch, sensor_to_world(touch, (Rw, tw)))
+            leading = result.leading()
+            proposal = session.next(radius=20.0, rng=k)
+            if any(session.fitted_at(h.error, [0]) for h in leading) or proposal.contact is None:
+                continue
+            located += 1
+            x = session.features[0].points
+            contact = session.world[0].contact if session.world[0].contact is not None else \
+                session.features[0].geometry.contact
+            gap = np.linalg.norm(x - contact, axis=1)
+            line = proposal.approach
+            assert np.min(np.linalg.norm(x - proposal.contact, axis=1)) < 1e-9           # a touched point
+            assert gap[np.argmin(np.linalg.norm(x - proposal.contact, axis=1))] >= np.max(gap) - 1.0
+            off = proposal.contact - line.start
+            assert np.linalg.norm(off - (off @ line.direction) * line.direction) < 1e-9   # on the line
+            for h in leading:
+                y = h.scale * line.start @ h.rotation.T + h.translation
+                assert models[h.model].planes(y[None])[0][0] > 0
+            truth = Hypothesis("egg", Rw.T, -Rw.T @ tw, 1.0, 0.0, np.zeros(0), ())
+            hit = first_hit(egg.model, truth, line, 0.3)
+            assert hit is not None and (hit - line.start) @ line.direction <= off @ line.direction + 0.3
+            assert np.allclose(proposal.directions @ line.direction, 0.0, atol=1e-9)
+            assert (proposal.directions[0] @ (proposal.contact - contact)) > 0
+    assert located >= 4
+
+
 def test_session_files_round_trip_and_bad_ones_are_one_line(tmp_path, capsys):
     """A session written and read back keeps its touches and poses; a rotation that is not one, a
     touch without curves or with NaN, and an empty list each exit 2 with one line naming the file

@@ -56,21 +56,21 @@ farthest from the earlier contacts among those its pose predicts to meet,
 its gain the entropy between the model and unknown (what the touch can
 settle).
 
-Locating.  The predictions above are only as good as the poses: where no
-leading hypothesis' pose fits every touch kept within the noise (the
-session's searches have not found the object's pose, or the object is none
-of the models), a line predicted from them tends to miss the object again
-and again.  What is known then is where the object is: at the touches'
-points.  The line proposed runs through the earlier touches' point farthest
-from every contact (so the new touch widens the touched span), along the
-most probable pose's outward normal there, :data:`STANDOFF` x ``radius``
-outside it and twice that far, so it meets the object at that point or
-before; the first curve runs away from the nearest contact.  The next
-touch's search, scored with the earlier touches, looks for the pose again.
-Its gain is not predicted: the proposal reports the entropy of the
-outcomes, ``unknown``'s included, the most a touch can settle.  Points
-whose line would start inside a leading hypothesis' surface are passed
-over.
+Locating. The predictions above are only as good as the poses: where no
+leading hypothesis' pose fits the touches kept as well as their noise allows
+(:meth:`tactrec.session.Session.fitted_at`: the session's searches have not
+found the object's pose, or the object is none of the models), a line
+predicted from them tends to miss the object again and again. What is known
+then is where the object is: at the touches' points. The line proposed runs
+through the earlier touches' point farthest from every contact (so the new
+touch widens the touched span), along the most probable pose's outward
+normal there, :data:`STANDOFF` x ``radius`` outside it and twice that far,
+so it meets the object at that point or before; the first curve runs away
+from the nearest contact. The next touch's search, scored with the earlier
+touches, looks for the pose again. Its gain is not predicted: the proposal
+reports the entropy of the outcomes, ``unknown``'s included, the most a
+touch can settle. Points whose line would start inside a leading hypothesis'
+surface are passed over.
 
 Choice.  The gain saturates: after one touch, most places that qualify
 separate the leading hypotheses at their poses completely, and their gains
@@ -172,7 +172,7 @@ def propose(session, *, radius: float, angle: float = 60.0, candidates: int = CA
     if len(leading) < 2 and probs.get(leading[0].model, 0.0) >= MASS:
         return Proposal(None, None, None, 0.0, hyps, "one hypothesis holds the probability: nothing to separate")
     use = session.kept()
-    if not any(all(h.consistent[i] for i in use) for h in leading):
+    if not any(session.fitted_at(h.error, use) for h in leading):
         # no leading pose fits the touches: none predicts where the object is, the touches do
         found = _locate(session, leading, radius=radius, angle=angle)
         if found is not None:
