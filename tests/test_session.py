@@ -164,6 +164,8 @@ def test_next_sends_the_line_through_a_touched_point_when_no_pose_fits(small):
             assert hit is not None and (hit - line.start) @ line.direction <= off @ line.direction + 0.3
             assert np.allclose(proposal.directions @ line.direction, 0.0, atol=1e-9)
             assert (proposal.directions[0] @ (proposal.contact - contact)) > 0
+            out = proposal.to_json()
+            assert out["gain"] > 0 and [h["model"] for h in out["hypotheses"]] == [h.model for h in leading]
     assert located >= 4
 
 

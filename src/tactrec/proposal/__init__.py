@@ -176,8 +176,10 @@ def propose(session, *, radius: float, angle: float = 60.0, candidates: int = CA
         # no leading pose fits the touches: none predicts where the object is, the touches do
         found = _locate(session, leading, radius=radius, angle=angle)
         if found is not None:
+            contact, normal, directions, line = found
             rest = max(1.0 - sum(w for _, w in hyps), 0.0)
-            return Proposal(*found, entropy(np.array([w for _, w in hyps] + [rest])), hyps, approach=found[-1])
+            gain = entropy(np.array([w for _, w in hyps] + [rest]))
+            return Proposal(contact, normal, directions, gain, hyps, approach=line)
     if len(leading) < 2:
         sure = probs.get(leading[0].model, 0.0)
         # one model against unknown: a touch its pose predicts, as far from the others as reach allows
