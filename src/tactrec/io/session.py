@@ -24,10 +24,10 @@ import numpy as np
 from ..errors import InputError
 from .atomic import write_text_atomic
 from .meeting import check_meeting
-from .touch import TactileData, _check_reach, _parse_json, _read_text, _vector, load_touch, number
+from .touch import TactileData, _check_reach, _read_text, _vector, load_touch, number, parse_touch
 
-__all__ = ["SessionTouch", "SessionMiss", "MissedLine", "load_session", "save_session", "is_session_file",
-           "rigid_pose"]
+__all__ = ["SessionTouch", "SessionMiss", "MissedLine", "load_session", "parse_session_touch", "save_session",
+           "is_session_file", "rigid_pose"]
 
 
 def rigid_pose(rotation, translation, source: str, what: str = "sensor2world") -> tuple[np.ndarray, np.ndarray]:
@@ -147,40 +147,12 @@ def load_session(path: str | os.PathLike) -> list:
     path = Path(path)
     if not is_session_file(path):
         return [SessionTouch(load_touch(path))]
-    text = _read_text(path)
-    obj = json.loads(text)
+    obj = json.loads(_read_text(path))           # NaN is each touch's own error (parse_session_touch)
     touches = obj["touches"]
     if not isinstance(touches, list) or not touches:
         raise InputError("'touches' must be a non-empty list of touches", path)
     units = obj.get("units")
-    out = []
-    for i, item in enumerate(touches, start=1):
-        source = f"{path} (touch {i})"
-        if not isinstance(item, dict):
-            raise InputError("a touch must be a JSON object with 'curves'", source)
-        pose = item.get("sensor2world")
-        item = {k: v for k, v in item.items() if k != "sensor2world"}
-        if units is not None and "units" not in item:
-            item["units"] = units
-        if pose is None:
-            R, t = np.eye(3), np.zeros(3)
-        elif not isinstance(pose, dict) or set(pose) != {"rotation", "translation"}:
-            raise InputError("'sensor2world' must be an object with 'rotation' and 'translation'", source)
-        else:
-            R, t = rigid_pose(pose["rotation"], pose["translation"], source)
-        if "missed" in item:
-            if item.get("curves"):
-                raise InputError("a touch that 'missed' has no curves", source)
-            unknown = set(item) - {"missed", "curves", "units"}
-            if unknown:
-                raise InputError(f"a touch that 'missed' has only 'missed' and 'units' (not {sorted(unknown)[0]!r})",
-                                 source)
-            out.append(SessionMiss(MissedLine.parse(item["missed"], source), R, t, item.get("units")))
-            continue
-        data = _parse_json(json.dumps(item), source)
-        _check_reach([c @ R.T + t for c in data.curves], source)          # in the world frame too
-        check_meeting(data)
-        out.append(SessionTouch(data, R, t))
+    out = [parse_session_touch(item, f"{path} (touch {i})", units) for i, item in enumerate(touches, start=1)]
     if not any(isinstance(t, SessionTouch) for t in out):
         raise InputError("no touch of the session met the object (every one 'missed')", path)
     # a missed line without units is in the touches' units
@@ -189,6 +161,36 @@ def load_session(path: str | os.PathLike) -> list:
     if len(kinds) > 1:
         raise InputError(f"the touches are in different units ({', '.join(sorted(map(str, kinds)))})", path)
     return out
+
+
+def parse_session_touch(item, source: str, units: str | None = None):
+    """One touch of a session (docs/formats.md) from its JSON object ``item``, already parsed: a
+    :class:`SessionTouch`, or a :class:`SessionMiss` for a line that met nothing; ``units`` the
+    session's, for a touch that gives none; ``source`` names it in errors."""
+    if not isinstance(item, dict):
+        raise InputError("a touch must be a JSON object with 'curves'", source)
+    pose = item.get("sensor2world")
+    item = {k: v for k, v in item.items() if k != "sensor2world"}
+    if units is not None and "units" not in item:
+        item["units"] = units
+    if pose is None:
+        R, t = np.eye(3), np.zeros(3)
+    elif not isinstance(pose, dict) or set(pose) != {"rotation", "translation"}:
+        raise InputError("'sensor2world' must be an object with 'rotation' and 'translation'", source)
+    else:
+        R, t = rigid_pose(pose["rotation"], pose["translation"], source)
+    if "missed" in item:
+        if item.get("curves"):
+            raise InputError("a touch that 'missed' has no curves", source)
+        unknown = set(item) - {"missed", "curves", "units"}
+        if unknown:
+            raise InputError(f"a touch that 'missed' has only 'missed' and 'units' (not {sorted(unknown)[0]!r})",
+                             source)
+        return SessionMiss(MissedLine.parse(item["missed"], source), R, t, item.get("units"))
+    data = parse_touch(item, source)
+    _check_reach([c @ R.T + t for c in data.curves], source)          # in the world frame too
+    check_meeting(data)
+    return SessionTouch(data, R, t)
 
 
 def save_session(touches: Sequence, path: str | os.PathLike) -> None:

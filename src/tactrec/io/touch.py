@@ -24,7 +24,7 @@ from ..units import unit_scale
 from .atomic import write_text_atomic
 from .meeting import check_meeting
 
-__all__ = ["TactileData", "load_touch", "save_touch", "MIN_CURVES", "MIN_POINTS"]
+__all__ = ["TactileData", "load_touch", "save_touch", "parse_touch", "read_json", "MIN_CURVES", "MIN_POINTS"]
 
 MIN_CURVES = 3
 MIN_POINTS = 5
@@ -215,14 +215,27 @@ def _read_text(path: Path) -> str:
     return text
 
 
-def _parse_json(text: str, source: str) -> TactileData:
+def read_json(text: str, source: str):
+    """The JSON value of ``text``; ``NaN`` and ``Infinity``, which JSON does not have, are one line."""
     def no_constant(name):
         raise InputError(f"not valid JSON: {name} is not a number", source)
 
     try:
-        obj = json.loads(text, parse_constant=no_constant)
+        return json.loads(text, parse_constant=no_constant)
     except json.JSONDecodeError as exc:
         raise InputError(f"not valid JSON ({exc.msg} at line {exc.lineno} column {exc.colno})", source) from None
+    except RecursionError:
+        raise InputError("not valid JSON: nested too deeply", source) from None
+
+
+def _parse_json(text: str, source: str) -> TactileData:
+    obj = read_json(text, source)
+    return parse_touch(obj, source)
+
+
+def parse_touch(obj, source: str) -> TactileData:
+    """A touch from the JSON object ``obj`` of a tactile data file (docs/formats.md), already parsed
+    (a service's request, :mod:`tactrec.service`); ``source`` names it in errors."""
     if not isinstance(obj, dict):
         raise InputError("expected a JSON object with 'curves'", source)
     if "curves" not in obj:
