@@ -68,6 +68,7 @@ refinement (more searches only in step 5):
 from __future__ import annotations
 
 import dataclasses
+import functools
 import time
 
 import numpy as np
@@ -94,6 +95,19 @@ STARTS = 2
 #: (step 1), the joint fits (steps 2-4 and 6, each time they run) and the search with the other
 #: touches in the score (step 5)
 STAGES = ("own", "joint", "context")
+
+
+def _atomic(method):
+    """``method`` leaves the session as it was when it raises (a bad touch, an interrupted search)."""
+    @functools.wraps(method)
+    def run(self, *args, **kwargs):
+        state = dict(vars(self), records=list(self.records), misses=list(self.misses), _joint=dict(self._joint))
+        try:
+            return method(self, *args, **kwargs)
+        except BaseException:
+            vars(self).update(state)
+            raise
+    return run
 
 
 class Session:
@@ -136,9 +150,11 @@ class Session:
         """Each touch's data in the world frame, in order."""
         return [r.world for r in self.records]
 
+    @_atomic
     def add(self, data: TactileData, sensor2world=None) -> SessionResult:
         """Add a touch (sensor frame; ``sensor2world`` a ``(rotation, translation)`` pair or None for
-        points already in the world frame) and recognise the session again."""
+        points already in the world frame) and recognise the session again; where it raises, the
+        session is as it was."""
         start = time.perf_counter()
         if sensor2world is None:
             touch = SessionTouch(data)
@@ -161,6 +177,7 @@ class Session:
         self.result = dataclasses.replace(self.result, seconds=time.perf_counter() - start, stages=self._stages)
         return self.result
 
+    @_atomic
     def add_miss(self, line, sensor2world=None) -> SessionResult | None:
         """Add a touch whose approach ``line`` (:class:`~tactrec.io.session.MissedLine`, sensor frame;
         ``sensor2world`` as for :meth:`add`) met nothing: evidence against every pose whose surface
