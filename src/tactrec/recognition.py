@@ -60,7 +60,7 @@ class Recognition:
     estimate : LocalGeometry
         Contact, normal and principal curvatures estimated from the data.
     seconds : float
-        Wall time of the recognition.
+        Wall time of the recognition, its probabilities included.
     method : str
     evidence : Evidence or None
         What the probabilities come from (:mod:`tactrec.probability`): each data point's distance
@@ -360,8 +360,11 @@ class Recognizer:
         limit = max(fit_limit(touch, self.floor), touch.fit)
         found = evidence([r.model for r in ok], [self._residuals(r, touch) for r in ok],
                          [len(c) for c in touch.joint_curves], touch.noise, limits=(limit,))
-        return Recognition(best, ranking, touch.estimate, time.perf_counter() - start, self.method.name, found,
-                           outcome.settled, outcome.work, outcome.depth, touch, outcome.allowed, self.unknown_prior)
+        out = Recognition(best, ranking, touch.estimate, 0.0, self.method.name, found, outcome.settled, outcome.work,
+                          outcome.depth, touch, outcome.allowed, self.unknown_prior)
+        out.probabilities                        # the probabilities are part of the recognition and of its seconds
+        object.__setattr__(out, "seconds", time.perf_counter() - start)          # set once, before anyone sees it
+        return out
 
     @property
     def floor(self) -> float:
