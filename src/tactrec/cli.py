@@ -258,6 +258,17 @@ def cmd_next(args) -> int:
     return run(args, open_models=open_models, options={}, warn=_warn)
 
 
+def cmd_serve(args) -> int:
+    from .cli_session import cmd_serve as run
+    from .database import open_models
+    from .methods import get_method
+
+    if (args.db is None) == (not args.models):
+        raise InputError("give either --db DB or --models MODEL...", "tactrec serve")
+    get_method(args.method).configure(**_recognition_options(args))          # a bad option before any work
+    return run(args, open_models=open_models, options=_recognition_options(args), warn=_warn)
+
+
 def cmd_demo(args) -> int:
     from .demo import run_demo
 
@@ -320,6 +331,14 @@ def build_parser() -> argparse.ArgumentParser:
                     default_method=DEFAULT_METHOD)
     unknown_prior_option(sub.choices["next"])
     sub.choices["next"].set_defaults(func=cmd_next)
+
+    from .cli_session import add_serve_parser
+
+    p = add_serve_parser(sub, mesh_options=_mesh_options, methods=METHODS, default_method=DEFAULT_METHOD)
+    p.add_argument("--delta", type=_positive, help="lookup tolerance on (k1, k2), 1/model units (method paper)")
+    p.add_argument("--budget", type=_count(1), help="the search's budget per model and normal tried (method fast)")
+    unknown_prior_option(p)
+    p.set_defaults(func=cmd_serve)
 
     p = sub.add_parser("simulate", help="generate tactile data on a model")
     p.add_argument("model", metavar="MODEL", help="model file or built-in name")

@@ -8,10 +8,10 @@ import sys
 from .errors import InputError
 from .units import conversion
 
-__all__ = ["recognize_session", "format_session", "cmd_next", "add_next_parser", "DEFAULT_RADIUS_MM"]
+from .service import DEFAULT_RADIUS_MM
 
-#: how far from an earlier contact ``next`` may propose a touch, millimetres (converted to the session's units)
-DEFAULT_RADIUS_MM = 40.0
+__all__ = ["recognize_session", "format_session", "cmd_next", "add_next_parser", "cmd_serve", "add_serve_parser",
+           "DEFAULT_RADIUS_MM"]
 
 
 def recognize_session(recognizer, touches):
@@ -97,3 +97,34 @@ def add_next_parser(sub, *, positive, mesh_options, methods, default_method) -> 
     p.add_argument("--seed", type=int, default=0, help="random seed of the candidate places (default 0)")
     mesh_options(p)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def cmd_serve(args, *, open_models, options, warn) -> int:
+    """``tactrec serve --db DB``: requests on standard input, answers on standard output (:mod:`tactrec.service`)."""
+    from .recognition import Recognizer, default_workers
+    from .service import serve
+
+    db = open_models(db=args.db, models=args.models, warn=warn, quiet=True, units=args.units, scale=args.scale)
+    workers = default_workers() if len(db) > 4 else 1
+    with Recognizer(db, method=args.method, workers=workers, unknown_prior=args.unknown_prior,
+                    **options) as recognizer:
+        if not args.quiet:
+            print(f"tactrec serve: {len(db)} models, {args.method}; one JSON request per line", file=sys.stderr,
+                  flush=True)
+        served = serve(recognizer, sys.stdin.buffer, sys.stdout, seed=args.seed)
+    if not args.quiet:
+        print(f"tactrec serve: {served} requests answered", file=sys.stderr)
+    return 0
+
+
+def add_serve_parser(sub, *, mesh_options, methods, default_method):
+    p = sub.add_parser("serve", help="keep a database loaded and answer JSON requests, one per line, on "
+                       "standard input and output (docs/formats.md)")
+    p.add_argument("--db", metavar="DB", help="database built by 'tactrec build'")
+    p.add_argument("--models", nargs="+", metavar="MODEL", help="model files or built-in names, instead of --db")
+    p.add_argument("--method", choices=sorted(methods), default=default_method,
+                   help=f"registration method (default {default_method})")
+    p.add_argument("--seed", type=int, default=0, help="next's seed where a request gives none (default 0)")
+    mesh_options(p)
+    p.add_argument("--quiet", action="store_true", help="nothing on standard error but errors")
+    return p
