@@ -205,7 +205,7 @@ def test_data_csv_is_good_before_corruption(tmp_path, capsys, touch):
     assert capsys.readouterr().err == ""
 
 
-@pytest.mark.parametrize("header", ["x,y,z", "curve,x,y", "id,x,y,z", "curve,x,y,z,w"])
+@pytest.mark.parametrize("header", ["curve,stroke,x,y,z", "curve,x,y", "id,x,y,z", "curve,x,y,z,w", "curve,x,x,y,z"])
 def test_data_csv_wrong_header(tmp_path, capsys, touch, header):
     path = tmp_path / "bad.csv"
     lines = _csv(touch, header)

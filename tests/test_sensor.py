@@ -162,3 +162,42 @@ def test_simulate_takes_every_sensor_option(tmp_path, capsys):
     assert main(["recognize", str(tmp_path / "a.json"), "--models", "sphere-33"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "tip_radius" in err[0] and "a.json" in err[0]
+
+
+def test_a_stream_in_csv_becomes_the_curves(tmp_path, sphere, capsys):
+    """Twenty seeded unevenly sampled touches written as a sensor streams them: a ``stroke,t,x,y,z``
+    CSV with the rows shuffled, and a ``t,x,y,z`` stream whose strokes are separated by rows
+    without coordinates (the sensor lifted); both read back as the touch's curves in time order,
+    and the stream is recognised as the file of curves is.  Times that are not numbers, or rows
+    with some coordinates missing, are one line naming the file and the line."""
+    rng = np.random.default_rng(5)
+    for k, data in enumerate(_touches(sphere, Imperfections(uneven=3.0), seed=5)):
+        times = [np.sort(rng.uniform(10.0 * i, 10.0 * i + 5.0, len(c))).tolist() for i, c in enumerate(data.curves)]
+        rows = [f"{i + 1},{t!r},{x!r},{y!r},{z!r}" for i, c in enumerate(data.curves)
+                for t, (x, y, z) in zip(times[i], c.tolist())]
+        shuffled = tmp_path / f"strokes-{k}.csv"
+        shuffled.write_text("\n".join(["stroke,t,x,y,z"] + list(rng.permutation(rows))) + "\n")
+        lifted = tmp_path / f"stream-{k}.csv"
+        lines = ["t,x,y,z"]
+        for i, c in enumerate(data.curves):
+            lines += [f"{t!r},{x!r},{y!r},{z!r}" for t, (x, y, z) in zip(times[i], c.tolist())]
+            lines += [f"{times[i][-1] + 1.0!r},,,"]                                   # the lift
+        lifted.write_text("\n".join(lines) + "\n")
+        for path in (shuffled, lifted):
+            back = load_touch(path)
+            assert len(back.curves) == len(data.curves)
+            assert all(np.array_equal(a, b) for a, b in zip(back.curves, data.curves))
+    json_path = tmp_path / "curves.json"
+    save_touch(data, json_path)
+    outputs = []
+    for path in (json_path, lifted):
+        assert main(["recognize", str(path), "--models", "sphere-33", "cylinder-50", "--json", "--quiet"]) == 0
+        outputs.append(json.loads(capsys.readouterr().out))
+    assert outputs[0]["best"] == outputs[1]["best"] == "sphere-33"
+    assert outputs[0]["ranking"][0]["error"] == pytest.approx(outputs[1]["ranking"][0]["error"], rel=1e-9, abs=1e-12)
+    for bad, where in (("t,x,y,z\n1.0,1,2,3\nsoon,1,2,3\n", "line 3"), ("t,x,y,z\n1.0,1,2,3\n2.0,1,,3\n", "line 3")):
+        path = tmp_path / "bad.csv"
+        path.write_text(bad)
+        assert main(["recognize", str(path), "--models", "sphere-33", "--quiet"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and str(path) in err[0] and where in err[0], err

@@ -246,37 +246,72 @@ def parse_touch(obj, source: str) -> TactileData:
                                    tip_radius=obj.get("tip_radius", 0.0))
 
 
+#: the columns a CSV touch may have: the coordinates, the curve's (or stroke's) label, the time
+_CSV_COLUMNS = ("curve", "stroke", "t", "x", "y", "z")
+
+
+def _csv_header(header: list, source: str) -> dict:
+    """Column index by name (docs/formats.md, A touch): ``x``, ``y``, ``z``, at most one of ``curve``
+    and ``stroke`` and an optional ``t``, in any order."""
+    unknown = [h for h in header if h not in _CSV_COLUMNS]
+    if unknown or len(set(header)) != len(header) or not {"x", "y", "z"} <= set(header) \
+            or {"curve", "stroke"} <= set(header):
+        raise InputError(f"CSV header must name x, y and z, with 'curve' (or 'stroke') and an optional 't' "
+                         f"(got {','.join(header)!r})", source)
+    return {name: header.index(name) for name in header}
+
+
+def _csv_number(cell: str, what: str, line_no: int, source: str) -> float:
+    try:
+        value = float(cell)
+    except ValueError:
+        raise InputError(f"line {line_no}: {what} must be a number (got {cell!r})", source) from None
+    if not math.isfinite(value):
+        raise InputError(f"line {line_no}: {what} is not finite ({cell.strip()})", source)
+    return value
+
+
 def _parse_csv(text: str, source: str) -> TactileData:
+    """A CSV touch (docs/formats.md): a label column names each point's curve, or, without one, the
+    rows are a sensor's stream and a row with no coordinates (the sensor lifted) ends a stroke; a
+    ``t`` column orders each curve's points and the curves."""
     reader = csv.reader(io.StringIO(text))
     try:
         header = [h.strip().lower() for h in next(reader)]
     except (StopIteration, csv.Error):
         raise InputError("empty CSV", source) from None
-    if header != ["curve", "x", "y", "z"]:
-        raise InputError(f"CSV header must be 'curve,x,y,z' (got {','.join(header)!r})", source)
+    col = _csv_header(header, source)
+    label = col.get("curve", col.get("stroke"))
     curves: dict[str, list] = {}
     extra: dict[str, list] = {}
+    stroke = 0
     try:
         for line_no, row in enumerate(reader, start=2):
-            if not row or all(not cell.strip() for cell in row):
+            blank = not row or all(not cell.strip() for cell in row)
+            if blank and label is not None:
                 continue
-            if len(row) != 4:
-                raise InputError(f"line {line_no}: expected 4 fields, got {len(row)}", source)
-            key = row[0].strip()
-            try:
-                point = [float(cell) for cell in row[1:]]
-            except ValueError:
-                raise InputError(f"line {line_no}: coordinates must be numbers (got {row[1:]})", source) from None
-            if not all(math.isfinite(x) for x in point):
-                raise InputError(f"line {line_no}: coordinates are not finite ({point})", source)
-            (extra if key in {"contact", "outward"} else curves).setdefault(key, []).append(point)
+            if not blank and len(row) != len(header):
+                raise InputError(f"line {line_no}: expected {len(header)} fields, got {len(row)}", source)
+            if blank or (label is None and all(not row[col[a]].strip() for a in "xyz")):
+                stroke += 1 if curves.get(str(stroke)) else 0            # the sensor lifted: a new stroke
+                continue
+            point = [_csv_number(row[col[a]], "coordinates", line_no, source) for a in "xyz"]
+            key = row[label].strip() if label is not None else str(stroke)
+            if key in {"contact", "outward"}:
+                extra.setdefault(key, []).append(point)
+                continue
+            t = _csv_number(row[col["t"]], "t", line_no, source) if "t" in col else 0.0
+            curves.setdefault(key, []).append((t, point))
     except csv.Error as exc:
         raise InputError(f"malformed CSV ({exc})", source) from None
     for key, pts in extra.items():
         if len(pts) != 1:
             raise InputError(f"'{key}' must be given on one line", source)
-    return TactileData.from_arrays(list(curves.values()),
-                                   contact=extra.get("contact", [None])[0],
+    # each curve in time order, and the curves by when they start (stable sorts: rows at one time keep
+    # the file's order, and without times the curves are in the order they first appear)
+    runs = sorted(curves.values(), key=lambda rows: min(t for t, _ in rows))
+    ordered = [[p for _, p in sorted(rows, key=lambda row: row[0])] for rows in runs]
+    return TactileData.from_arrays(ordered, contact=extra.get("contact", [None])[0],
                                    outward=extra.get("outward", [None])[0], source=source)
 
 
