@@ -54,10 +54,12 @@ def cmd_bench(args) -> int:
         from .bench.calibration import SETS as CALIBRATION_SETS
         from .bench.multi_touch import SETS as SESSION_SETS
         from .bench.open_world import SCAN_SETS as OPEN_SETS
+        from .bench.sensor import SCAN_SETS as SENSOR_SETS
 
-        known = {"calibration": CALIBRATION_SETS, "multi-touch": SESSION_SETS, "open-world": OPEN_SETS}.get(args.name)
+        known = {"calibration": CALIBRATION_SETS, "multi-touch": SESSION_SETS, "open-world": OPEN_SETS,
+                 "sensor": SENSOR_SETS}.get(args.name)
         if known is None:
-            raise InputError("--sets applies to calibration, multi-touch and open-world only", args.name)
+            raise InputError("--sets applies to calibration, multi-touch, open-world and sensor only", args.name)
         extra["sets"] = _known(args.sets, known, "set", "--sets", args.name)
     if args.strategies is not None:
         from .bench.multi_touch import STRATEGIES

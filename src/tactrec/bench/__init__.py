@@ -11,7 +11,7 @@ from typing import Callable
 
 from . import (baselines, calibration, cold_start, fast_vs_paper, field, fit_limit, kernels, multi_touch, open_world,
                paper_closedform, paper_example, paper_fig11, paper_mesh, paper_steps, paper_table5, paper_table6, scale,
-               search_limits, serve)
+               search_limits, sensor, serve)
 
 __all__ = ["BENCHMARKS"]
 
@@ -37,4 +37,5 @@ BENCHMARKS: dict[str, Callable[..., dict]] = {
     "field": field.run,
     "open-world": open_world.run,
     "serve": serve.run,
+    "sensor": sensor.run,
 }

@@ -61,12 +61,14 @@ def _database(models: tuple[str, ...]):
     return _DB[models]
 
 
-def _simulate(entry, m_index: int, instance: int, seed: int, protocol: str):
+def _simulate(entry, m_index: int, instance: int, seed: int, protocol: str, imperfections=None):
+    """A touch of ``protocol`` on ``entry`` (its site and the data), recorded by a sensor with
+    ``imperfections`` (:class:`tactrec.sensor.Imperfections`; None: a perfect one)."""
     spec = PROTOCOLS[protocol]
     rng = instance_rng(seed, m_index, instance, 1 if protocol == "hard" else 0)
     points = int(round(spec["length"] / SPACING)) + 1
     options = dict(points=points, spacing=SPACING, angle=spec["angle"], noise=spec["noise"], noise_kind="gaussian",
-                   outward=spec["outward"])
+                   outward=spec["outward"], imperfections=imperfections)
     model = entry.model
     if spec["site"] == "vertex":
         vertices = spread_vertices(model, instance + 1, rings=15, rng=instance_rng(seed, m_index))
