@@ -26,7 +26,7 @@ import numpy as np
 from .errors import InputError
 from .estimation import LocalGeometry, estimate, noise_level
 from .io.touch import TactileData
-from .tip import corrected, offset, surface_curves
+from .tip import EDGE, corrected, offset, surface_curves
 
 __all__ = ["Touch", "subset"]
 
@@ -103,7 +103,8 @@ class Touch:
         if not sides:
             bend = 1.0 / (-geometry.k2 if geometry.oriented else max(-geometry.k2, geometry.k1))
             raise InputError(f"tip_radius {tip:g}: the curves bend more tightly (radius {bend:.3g}) than a tip of "
-                             "that radius can trace any surface", data.source)
+                             f"that radius can trace any surface (a sharp edge's bend: {1 / (1 + EDGE):g} x the radius "
+                             "or more)", data.source)
         sign, surface, _ = sides[0]
         return dataclasses.replace(self, estimate=surface if sign == 1 else surface.flipped(), tip=tip,
                                    sides_data=tuple(sides))

@@ -39,11 +39,18 @@ that ``r``; tactrec handles it by one rule:
 Which side is outside: the normal a touch is tried with (``outward``, or
 both without it) is the model's outward normal under the registration, so
 each side moves the centres against its own normal, and the offset is the
-same on both (the centres are always outside).  A side where ``1 + r kappa
-<= 0`` for a principal curvature (the centres bend more tightly than a tip
-of radius ``r`` can follow any surface: the surface would be concave more
-tightly than the tip) is not tried; a touch with no side left is an
-:class:`~tactrec.errors.InputError` (:func:`tactrec.features.Touch.from_data`).
+same on both (the centres are always outside).
+
+Where ``1 + r kappa <= 0`` the centres bend (convex, radius ``<= r``) more
+tightly than a tip can follow any surface.  Exactly ``1 + r kappa = 0`` is
+a sharp convex edge: the centres circle it at the radius ``r``, and the
+estimate scatters about that value.  So a bend up to :data:`EDGE` tighter
+(``1 + r kappa > -EDGE``, a bend radius above ``r / (1 + EDGE)``)
+is read as such an edge, its ``1 + r kappa`` taken as :data:`SHARP` (a
+surface radius of ``SHARP r``); a tighter bend is not a guess: that side is
+not tried, and a touch with no side left is an
+:class:`~tactrec.errors.InputError` naming its file
+(:meth:`tactrec.features.Touch.with_estimate`).
 
 With ``r = 0`` nothing here runs: the touch and the models are used as they
 are.
@@ -57,11 +64,17 @@ import numpy as np
 
 from .estimation import LocalGeometry
 
-__all__ = ["corrected", "surface_normals", "surface_curves", "Offset", "offset", "foot_distance", "FOOT_STEPS"]
+__all__ = ["EDGE", "SHARP", "corrected", "surface_normals", "surface_curves", "Offset", "offset", "foot_distance",
+           "FOOT_STEPS"]
 
 #: tangent-plane steps of :func:`foot_distance` (each one implicit evaluation; the tangential error
 #: shrinks by about ``r |kappa|`` a step)
 FOOT_STEPS = 12
+#: a bend of the centres this much tighter than the tip (in ``1 + r kappa``) is a sharp edge's, within
+#: the estimate's error; beyond it, no surface gives the data
+EDGE = 0.25
+#: the ``1 + r kappa`` a sharp edge's bend is given (the surface's radius there, over ``r``)
+SHARP = 0.05
 #: highest degree of the polynomial in arc length that gives a curve's tangent at each point
 TANGENT_DEGREE = 6
 
@@ -70,11 +83,12 @@ def corrected(geometry: LocalGeometry, r: float) -> LocalGeometry | None:
     """The surface's estimate at the contact from the offset data's ``geometry`` (normal as the side
     to try: the outward one): contact moved by ``-r N``, ``kappa -> kappa / (1 + r kappa)`` for the
     principal curvatures (and, by Euler's theorem, the normal curvatures along the tangents);
-    directions, tangents and normal kept.  None where ``1 + r kappa <= 0`` (module text)."""
-    if 1.0 + r * geometry.k2 <= 0.0:                      # k2 <= k1: the tighter bend of the two
+    directions, tangents and normal kept.  ``1 + r kappa`` below :data:`SHARP` but above ``-EDGE`` is
+    a sharp edge's (taken as :data:`SHARP`); None at or below ``-EDGE`` (module text)."""
+    if 1.0 + r * geometry.k2 <= -EDGE:                     # k2 <= k1: the tighter bend of the two
         return None
-    k1 = geometry.k1 / (1.0 + r * geometry.k1)
-    k2 = geometry.k2 / (1.0 + r * geometry.k2)
+    k1 = geometry.k1 / max(1.0 + r * geometry.k1, SHARP)
+    k2 = geometry.k2 / max(1.0 + r * geometry.k2, SHARP)
     c = np.sum(geometry.tangents * geometry.directions[0], axis=1)
     s = np.sum(geometry.tangents * geometry.directions[1], axis=1)
     kn = (k1 * c * c + k2 * s * s) / (c * c + s * s)
