@@ -64,12 +64,10 @@ refinement (more searches only in step 5):
    from the lines the sensor followed without meeting anything
    (:meth:`Session.add_miss`, :mod:`.lines`).
 
-Touches of a round tip (:mod:`tactrec.tip`), of one radius or several: every
-distance of steps 2-4 and 6 is measured from a touch's points against the
-model offset by its own tip; step 5's search screens the other touches' points
-moved onto the surface (each by its own estimate, on the side of its own
-normal) and steps them against their own offsets.  A missed line is measured
-against the model itself (:mod:`.lines`).
+Touches of round tips (:mod:`tactrec.tip`), of one radius or several: each
+touch's distances are measured against the model offset by its own tip; step
+5 screens the other touches moved onto the surface (by their own estimates).
+A missed line is measured against the model itself (:mod:`.lines`).
 """
 
 from __future__ import annotations
@@ -140,8 +138,8 @@ class Session:
 
     @property
     def tips(self) -> np.ndarray:
-        """Each touch's tip radius ``(N,)`` (data units; 0: points on the surface)."""
-        return np.array([r.features.tip for r in self.records], dtype=np.float64)
+        """Each touch's tip radius ``(N,)``, data units."""
+        return np.array([r.tip for r in self.records], dtype=np.float64)
 
     @property
     def world(self) -> list:
@@ -236,8 +234,7 @@ class Session:
                 return
             others = [self.records[i] for i in use if i != start]
             context = [c for r in others for c in r.world.curves]
-            tips = [r.features.tip for r in others for _ in r.world.curves]
-            surface = [c for r in others for c in r.features.on_surface(r.features.sides[0][0]).data.curves]
+            tips, surface = [r.tip for r in others for _ in r.world.curves], [c for r in others for c in r.surface_curves]
             found = self._timed("context", self.recognizer.recognize, self.records[start].world, context=context,
                                 among=among, fit=fit, budget=None if np.isinf(budget) else int(budget),
                                 context_tips=tips, context_surface=surface)
