@@ -5,6 +5,15 @@
 (one with an ``outward`` hint, both without), the data's noise and the
 touch's radius.  :meth:`Touch.in_units` gives the same touch in a model's
 units, once per unit scale.
+
+A touch whose points are the centres of a round tip (``tip_radius`` > 0) is
+handled by the one rule of :mod:`tactrec.tip`: its estimate is the surface's
+(the contact moved by ``-r N``, each principal curvature ``kappa / (1 + r
+kappa)``), the stages that read its local shape or a model's distance field
+take its points moved onto the surface (:meth:`Touch.on_surface`, one copy
+per side of the normal tried), and every exact distance is measured from its
+points, the centres, against the model offset by the tip
+(:meth:`Touch.exact`).
 """
 
 from __future__ import annotations
@@ -17,6 +26,7 @@ import numpy as np
 from .errors import InputError
 from .estimation import LocalGeometry, estimate, noise_level
 from .io.touch import TactileData
+from .tip import EDGE, corrected, offset, surface_curves
 
 __all__ = ["Touch", "subset"]
 
@@ -48,6 +58,16 @@ class Touch:
     fit : float
         With a context: the mean distance over all its points (data units) that its caller counts
         as a fit of the touch and the context together (0: the touch's own fit limit decides).
+    tip : float
+        The tip's radius (data units; 0: the points lie on the surface).
+    sides_data : tuple of (sign, LocalGeometry, tuple of (n_i, 3) arrays)
+        With a tip: per side of the normal to try (1: as estimated, -1: reversed), the surface's
+        estimate (normal on that side) and the curves moved onto the surface, data units
+        (:mod:`tactrec.tip`).
+    context_tips : tuple of float
+        The tip's radius of each context curve (data units; empty: all 0).
+    context_surface : tuple of (n_i, 3) arrays
+        The context curves moved onto the surface (data units; empty: the context as given).
     """
 
     data: TactileData
@@ -56,16 +76,38 @@ class Touch:
     noise: float = 0.0
     context: tuple = ()
     fit: float = 0.0
+    tip: float = 0.0
+    sides_data: tuple = ()
+    context_tips: tuple = ()
+    context_surface: tuple = ()
 
     @classmethod
     def from_data(cls, data: TactileData, *, window: int | str | None = "auto", degree: int = 3,
                   curvature_method: str = "auto") -> "Touch":
-        if data.tip_radius > 0:
-            raise InputError(f"tip_radius {data.tip_radius:g}: tactrec does not register the centres of a round tip "
-                             "yet; give points on the surface (tip_radius 0)", data.source)
         geometry = estimate(data, window=window, degree=degree, method=curvature_method)
         noise = float(np.median([noise_level(np.asarray(c, dtype=np.float64)) for c in data.curves]))
-        return cls(data, geometry, 1.0, noise)
+        return cls(data, geometry, 1.0, noise).with_estimate(geometry)
+
+    def with_estimate(self, geometry: LocalGeometry) -> "Touch":
+        """The same touch with the estimate of its data ``geometry`` (data units): with a tip, the
+        centres' estimate, corrected and the curves moved onto the surface per side
+        (:mod:`tactrec.tip`).  An :class:`InputError` where no side can be traced by the tip."""
+        data, tip = self.data, float(self.data.tip_radius)
+        if not tip > 0:
+            return dataclasses.replace(self, estimate=geometry)
+        sides = []
+        for sign in (1,) if geometry.oriented else (1, -1):
+            surface = corrected(geometry if sign == 1 else geometry.flipped(), tip)
+            if surface is not None:
+                sides.append((sign, surface, surface_curves(data.curves, geometry, tip, sign)))
+        if not sides:
+            bend = 1.0 / (-geometry.k2 if geometry.oriented else max(-geometry.k2, geometry.k1))
+            raise InputError(f"tip_radius {tip:g}: the curves bend more tightly (radius {bend:.3g}) than a tip of "
+                             f"that radius can trace any surface (a sharp edge's bend: {1 / (1 + EDGE):g} x the radius "
+                             "or more)", data.source)
+        sign, surface, _ = sides[0]
+        return dataclasses.replace(self, estimate=surface if sign == 1 else surface.flipped(), tip=tip,
+                                   sides_data=tuple(sides))
 
     @cached_property
     def curves(self) -> tuple[np.ndarray, ...]:
@@ -105,34 +147,91 @@ class Touch:
         context = self.joint_curves[len(self.curves):]
         return np.concatenate([self.subset(per_curve), *(c[len(c) // 2][None] for c in context)])
 
-    def with_context(self, curves, *, fit: float = 0.0) -> "Touch":
+    def with_context(self, curves, *, fit: float = 0.0, tips=None, surface=None) -> "Touch":
         """The same touch, its poses scored also on ``curves`` (other touches, same frame, data units);
-        ``fit``: the joint mean distance that counts as a fit of them all (see :attr:`fit`)."""
+        ``fit``: the joint mean distance that counts as a fit of them all (see :attr:`fit`); ``tips``:
+        each curve's tip radius and ``surface`` the curves moved onto the surface (None: 0 and the
+        curves themselves)."""
+        tips = () if tips is None or not np.any(tips) else tuple(float(r) for r in tips)
+        surface = () if not tips or surface is None else tuple(np.asarray(c, dtype=np.float64) for c in surface)
         return dataclasses.replace(self, context=tuple(np.asarray(c, dtype=np.float64) for c in curves),
-                                   fit=float(fit))
+                                   fit=float(fit), context_tips=tips, context_surface=surface)
 
     @cached_property
     def geometry(self) -> LocalGeometry:
         """The estimate in this copy's units."""
-        g, s = self.estimate, self.scale
-        if s == 1.0:
-            return g
-        return dataclasses.replace(g, contact=g.contact * s, k1=g.k1 / s, k2=g.k2 / s,
-                                   normal_curvatures=g.normal_curvatures / s)
+        return _scaled(self.estimate, self.scale)
 
     @cached_property
-    def orientations(self) -> tuple[LocalGeometry, ...]:
-        """The estimates to try: the normal as oriented by ``outward``, or both normals."""
+    def sides(self) -> tuple[tuple[int, LocalGeometry], ...]:
+        """The estimates to try, each with its side (1: the normal as estimated, -1: reversed), this
+        copy's units: the normal as oriented by ``outward``, or both normals; with a tip, each the
+        surface's estimate on its side, and only the sides a tip can trace."""
+        if self.tip > 0:
+            return tuple((sign, _scaled(g, self.scale)) for sign, g, _ in self.sides_data)
         g = self.geometry
-        return (g,) if g.oriented else (g, g.flipped())
+        return ((1, g),) if g.oriented else ((1, g), (-1, g.flipped()))
+
+    @property
+    def orientations(self) -> tuple[LocalGeometry, ...]:
+        """The estimates of :attr:`sides`."""
+        return tuple(g for _, g in self.sides)
 
     def oriented(self, sign: int) -> LocalGeometry:
         """The estimate with the normal as estimated (``sign`` 1) or reversed (-1)."""
+        if self.tip > 0:
+            return dict(self.sides)[sign]
         return self.orientations[0] if sign == 1 else self.geometry.flipped()
 
     @cached_property
+    def _surfaces(self) -> dict:
+        return {}
+
+    def on_surface(self, sign: int) -> "Touch":
+        """The touch as the field and the local fits see it on side ``sign`` (:mod:`tactrec.tip`, (a)):
+        its curves moved onto the surface, its estimate that side's (normal as tried), the context
+        moved onto the surface, no tip.  The touch itself when neither it nor its context has a tip."""
+        if not self.tip > 0 and not self.context_tips:
+            return self
+        if sign not in self._surfaces:
+            if self.tip > 0:
+                _, g, curves = next(side for side in self.sides_data if side[0] == sign)
+            else:
+                g, curves = self.estimate if sign == 1 else self.estimate.flipped(), self.data.curves
+            data = dataclasses.replace(self.data, curves=curves, contact=g.contact, tip_radius=0.0)
+            context = self.context_surface or self.context
+            self._surfaces[sign] = dataclasses.replace(self, data=data, estimate=g, tip=0.0, sides_data=(),
+                                                       context=context, context_tips=(), context_surface=())
+        return self._surfaces[sign]
+
+    @cached_property
+    def joint_tips(self) -> np.ndarray:
+        """The tip's radius of each of :attr:`joint_curves` ``(k,)``, this copy's units."""
+        context = self.context_tips or (0.0,) * len(self.context)
+        return np.array((self.tip,) * len(self.curves) + tuple(context), dtype=np.float64) * self.scale
+
+    def exact(self, model, per_curve: int | None = None, *, screen: bool = False):
+        """What the exact distances of this copy's points are measured against (:mod:`tactrec.tip`, (b)):
+        ``model`` offset by each point's tip (``model`` itself without one), for
+        :attr:`joint_points` (``per_curve`` None), :meth:`joint_subset` or, with ``screen``,
+        :meth:`screen_subset` of ``per_curve`` points a curve."""
+        tips = self.joint_tips
+        if not np.any(tips):
+            return model
+        if per_curve is None:
+            radii = np.repeat(tips, [len(c) for c in self.joint_curves])
+        elif screen:
+            radii = np.concatenate([np.repeat(tips[:len(self.curves)], per_curve), tips[len(self.curves):]])
+        else:
+            radii = np.repeat(tips, per_curve)
+        return offset(model, radii)
+
+    @cached_property
     def radius(self) -> float:
-        """The largest distance of a data point from the contact, this copy's units."""
+        """The largest distance of a data point from the contact, this copy's units (with a tip, of a
+        point moved onto the surface, on the first side tried)."""
+        if self.tip > 0:
+            return self.on_surface(self.sides[0][0]).radius
         return float(np.max(np.linalg.norm(self.points - self.geometry.contact, axis=1)))
 
     @cached_property
@@ -149,6 +248,8 @@ class Touch:
         h = hashlib.sha1(np.ascontiguousarray(self.points).tobytes())
         h.update(np.ascontiguousarray(self.geometry.normal).tobytes())
         h.update(np.float64(self.scale).tobytes())
+        if self.tip > 0:
+            h.update(np.float64(self.tip).tobytes())
         return h.hexdigest()
 
     @property
@@ -165,3 +266,11 @@ class Touch:
         if scale == self.scale:
             return self
         return dataclasses.replace(self, scale=float(scale))          # every other field kept, nothing cached
+
+
+def _scaled(g: LocalGeometry, s: float) -> LocalGeometry:
+    """The estimate ``g`` with lengths multiplied by ``s``."""
+    if s == 1.0:
+        return g
+    return dataclasses.replace(g, contact=g.contact * s, k1=g.k1 / s, k2=g.k2 / s,
+                               normal_curvatures=g.normal_curvatures / s)

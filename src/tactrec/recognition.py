@@ -333,19 +333,21 @@ class Recognizer:
         return Session(self, **options)
 
     def recognize(self, data: TactileData, *, context=(), among=None, fit: float = 0.0,
-                  budget: int | None = None) -> Recognition:
+                  budget: int | None = None, context_tips=None, context_surface=None) -> Recognition:
         """Recognise one touch (Section 3.3).  ``context``: curves of other touches of the same object
         in the same frame, which the poses must fit too (a method that searches from this touch's
         local geometry scores its poses on them; see :class:`~tactrec.features.Touch`), and ``fit``
         the mean distance over all those points that counts as a fit (0: this touch's own limit).
         ``among``: the names of the models to search (None: all); the others are rejected as not
         searched.  ``budget``: the most work (closest-point queries) the search may spend in all, when
-        lower than the method's own budget; the first round runs whatever it costs."""
+        lower than the method's own budget; the first round runs whatever it costs.  ``context_tips``:
+        the tip radius of each context curve and ``context_surface`` the curves moved onto the surface
+        (:mod:`tactrec.tip`; None: no tip)."""
         start = time.perf_counter()
         _check_scale(data, self.models)
         touch = Touch.from_data(data, **self.estimation)
         if len(context):
-            touch = touch.with_context(context, fit=fit)
+            touch = touch.with_context(context, fit=fit, tips=context_tips, surface=context_surface)
         chosen = None
         if among is not None:
             unknown = sorted(set(among) - set(self._by_name))
@@ -373,8 +375,10 @@ class Recognizer:
         return float(getattr(self.config, "floor", FLOOR))
 
     def _residuals(self, r: Registration, touch: Touch) -> np.ndarray:
-        """The data's signed distances (data units) to the model of ``r`` under its pose."""
-        return residuals(self._by_name[r.model].model, r.rotation, r.translation, touch.joint_points, r.scale)
+        """The data's signed distances (data units) to the model of ``r`` under its pose (to the model
+        offset by each point's tip: :mod:`tactrec.tip`)."""
+        model = touch.in_units(r.scale).exact(self._by_name[r.model].model)
+        return residuals(model, r.rotation, r.translation, touch.joint_points, r.scale)
 
 
 

@@ -18,10 +18,11 @@ def in_model_units(touch: Touch, model) -> Touch:
 
 
 def best_of_orientations(register: Callable[..., Registration], touch: Touch, name: str) -> Registration:
-    """``register(geometry)`` for each normal of ``touch`` to try; the better registration, marked
-    with the sign of the normal it used and the touch's unit scale (a rejection if none is ok)."""
-    results = [dataclasses.replace(register(g), normal_sign=sign, scale=touch.scale)
-               for sign, g in zip((1, -1), touch.orientations)]
+    """``register(geometry, sign)`` for each normal of ``touch`` to try (:attr:`~tactrec.features.Touch.sides`);
+    the better registration, marked with the sign of the normal it used and the touch's unit scale (a
+    rejection if none is ok)."""
+    results = [dataclasses.replace(register(g, sign), normal_sign=sign, scale=touch.scale)
+               for sign, g in touch.sides]
     ok = [r for r in results if r.ok]
     if not ok:
         return Registration.rejection(name, results[0].rejected, scale=touch.scale)

@@ -2,6 +2,11 @@
 
 Step 1, the cheap stage (:func:`_cheap`); step 3, refinement (:func:`_refined`); the final polish
 (:func:`_polished`); and closed-form surfaces (:func:`_closed_form`).
+
+A touch with a round tip follows the one rule of :mod:`tactrec.tip`: the places, the field screen,
+its field steps and local grid take the touch moved onto the surface on the side tried
+(:meth:`~tactrec.features.Touch.on_surface`); every exact step and error is measured from the
+centres against the model offset by the tip (:meth:`~tactrec.features.Touch.exact`).
 """
 
 from __future__ import annotations
@@ -31,7 +36,7 @@ def _places(held, index: int, touch, sign: int, config: FastConfig, every: bool)
             held.cache.clear()
         model = held.entries[index].model
         g = touch.oriented(sign)
-        chosen, _, fit = mesh_fast.places(model, g, touch.points, touch.radius, spread=config.spread)
+        chosen, _, fit = mesh_fast.places(model, g, touch.on_surface(sign).points, touch.radius, spread=config.spread)
         if every:
             field = model.fine_curvatures
             chosen = stable_order(np.hypot(field.k1 - fit[0][0], field.k2 - fit[0][1]))
@@ -68,12 +73,13 @@ def field_stages(config: FastConfig, tier) -> tuple:
     return (turns, *config.screen_stages[0][1:]), (2 * turns, *config.screen_stages[-1][1:])
 
 
-def _field_poses(model, t, g, spots: np.ndarray, fit, tier, config: FastConfig, context):
+def _field_poses(model, t, sign: int, g, spots: np.ndarray, fit, tier, config: FastConfig, context):
     """A field tier's hypotheses at the places ``spots``: screened on the field with the data's normals
     (or, in a tilted tier, with normals tilted out to ``tier.tilt`` degrees, then each of the best
     few set on a dense local grid: :func:`tactrec.engine.screen.local_screen`), the best
     ``screen_keep`` refined on the field and the best ``2 refine`` of those taking one exact step.
-    Returns ``R, t, score, queries, hypotheses screened``."""
+    ``t`` is the touch, ``sign`` the side of its normal ``g``; ``context`` the other touches' points
+    the screen scores, moved onto the surface.  Returns ``R, t, score, queries, hypotheses screened``."""
     from ..engine.kernels import field_refine            # numba: only once a search needs it
     from ..engine.screen import DISTINCT, data_normals, local_screen, screen, tilted_normals
 
@@ -82,25 +88,26 @@ def _field_poses(model, t, g, spots: np.ndarray, fit, tier, config: FastConfig, 
         normals = [np.stack(tilted_normals(fit[2], g.tangents[0], cone=tier.tilt, step=config.tilt_step))]
     else:
         normals = data_normals(g, fit[2], distinct=DISTINCT)
-    x3, poses, lookups, q, tried = t.joint_subset(3 * config.coarse_points), [], 0, 0, 0
+    s, exact = t.on_surface(sign), t.exact(model, config.coarse_points)           # (a) and (b) of tactrec.tip
+    x3, poses, lookups, q, tried = s.joint_subset(3 * config.coarse_points), [], 0, 0, 0
     for dn in normals:
-        found = screen(model, g, spots, model.fine_curvatures.normal[spots], t.curves, dn,
+        found = screen(model, g, spots, model.fine_curvatures.normal[spots], s.curves, dn,
                        stages=stages, keep=config.screen_keep, extra=context)
         R, tr, grid = field_refine(*model.distance_field.args(), found.R, found.t, x3, config.field_steps)
         lookups += found.lookups + len(R) * len(x3) * (config.field_steps + 1)
         tried += len(found.owner)
         best = stable_order(grid)[:2 * config.refine]
-        poses.append(solve(model, R[best], tr[best], t.joint_subset(config.coarse_points),
+        poses.append(solve(exact, R[best], tr[best], t.joint_subset(config.coarse_points),
                            Criteria(1, tolerance=config.tolerance, predict=True)))
         q += poses[-1].queries
     R, tr, score = (np.concatenate([getattr(p, k) for p in poses]) for k in ("R", "t", "error"))
     if tier.tilt > 0:
         seeds = stable_order(score)[:config.refine]
-        R, tr, _, n = local_screen(model, R[seeds], tr[seeds], t.joint_subset(config.coarse_points), g.contact,
+        R, tr, _, n = local_screen(model, R[seeds], tr[seeds], s.joint_subset(config.coarse_points), g.contact,
                                    angle=0.6 * config.tilt_step,
                                    shift=0.75 * config.screen_step * t.radius)
         lookups += n
-        R, tr, score, q2 = solve(model, R, tr, t.joint_subset(config.coarse_points),
+        R, tr, score, q2 = solve(exact, R, tr, t.joint_subset(config.coarse_points),
                                  Criteria(1, tolerance=config.tolerance, predict=True))
         q += q2
     return R, tr, score, int(lookups * LOOKUP_COST) + q, tried
@@ -117,16 +124,19 @@ def _cheap(held, indices, touch, config: FastConfig, k: int) -> list[dict]:
             out.append({"rejected": "the touch is larger than the model", "queries": 0})
             continue
         x, screened = t.joint_subset(config.coarse_points), t.screen_subset(config.coarse_points)
-        context_middles = screened[len(t.subset(config.coarse_points)):] if t.context else None
+        exact, exact_screened = t.exact(model, config.coarse_points), t.exact(model, config.coarse_points, screen=True)
         poses, queries, tried = [], 0, 0
-        for sign, g in zip((1, -1), t.orientations):
+        for sign, g in t.sides:
             chosen, fit = _places(held, index, t, sign, config, tier.places is None)
             if tier.rotations == "field":
                 start, stop = tier_span(config.tiers, k)
                 spots = _screen_places(held, index, t, sign, config)[start:stop]
                 if len(spots) == 0:
                     continue
-                R, tr, score, q, n = _field_poses(model, t, g, spots, fit, tier, config, context_middles)
+                s = t.on_surface(sign)
+                context_middles = s.screen_subset(config.coarse_points)[len(s.subset(config.coarse_points)):] \
+                    if t.context else None
+                R, tr, score, q, n = _field_poses(model, t, sign, g, spots, fit, tier, config, context_middles)
                 tried, queries = tried + n, queries + q
                 poses.append((R, tr, score, np.full(len(R), sign)))
                 continue
@@ -139,10 +149,10 @@ def _cheap(held, indices, touch, config: FastConfig, k: int) -> list[dict]:
                 steps = config.cheap_steps
                 kept = max(config.screen, len(R) // 8)
                 if tier.places is not None and len(R) > kept and steps > 1:
-                    R, tr, first, q = solve(model, R, tr, screened, Criteria(1, predict=True))
+                    R, tr, first, q = solve(exact_screened, R, tr, screened, Criteria(1, predict=True))
                     keep = stable_order(first)[:kept]
                     R, tr, owner, steps, queries = R[keep], tr[keep], owner[keep], steps - 1, queries + q
-                R, tr, score, q = solve(model, R, tr, x, Criteria(steps, tolerance=config.tolerance, predict=True,
+                R, tr, score, q = solve(exact, R, tr, x, Criteria(steps, tolerance=config.tolerance, predict=True,
                                                                 history=config.history))
                 queries += q
                 order = np.lexsort((stable_order(score).argsort(), owner))          # each place's best rotation
@@ -162,8 +172,9 @@ def _cheap(held, indices, touch, config: FastConfig, k: int) -> list[dict]:
 
 
 def _registration(model, touch, R: np.ndarray, t: np.ndarray, error: float, sign: int) -> Registration:
-    """The registration of pose ``R (3, 3), t (3,)`` on a mesh, with the normal of sign ``sign``."""
-    return mesh_fast.registration(model, touch.oriented(sign), R, t, error, candidates=0, sign=sign, scale=touch.scale,
+    """The registration of pose ``R (3, 3), t (3,)`` on a mesh, with the normal of sign ``sign`` (its
+    spread measured against the model offset by the touch's tip)."""
+    return mesh_fast.registration(touch.exact(model), touch.oriented(sign), R, t, error, candidates=0, sign=sign, scale=touch.scale,
                                   x=touch.joint_points)
 
 
@@ -173,12 +184,13 @@ def _refined(held, indices, touch, config: FastConfig, chosen: list[dict]) -> li
     for index, poses in zip(indices, chosen):
         model = held.entries[index].model
         t = in_model_units(touch, model)
-        R, tr, error, q1 = solve(model, poses["R"], poses["t"], t.joint_subset(3 * config.coarse_points),
+        R, tr, error, q1 = solve(t.exact(model, 3 * config.coarse_points), poses["R"], poses["t"],
+                                 t.joint_subset(3 * config.coarse_points),
                                  Criteria(config.iterations, tolerance=config.tolerance, history=config.history))
         order = stable_order(error)
         b = order[0]
         others = np.concatenate([R[order], tr[order][:, :, None]], axis=2)                 # (k, 3, 4), best first
-        R, tr, error, q2 = solve(model, R[b:b + 1], tr[b:b + 1], t.joint_points,
+        R, tr, error, q2 = solve(t.exact(model), R[b:b + 1], tr[b:b + 1], t.joint_points,
                                  Criteria(2, tolerance=config.tolerance, history=config.history))
         found = _registration(model, t, R[0], tr[0], error[0], int(poses["sign"][b]))
         out.append({"registration": dataclasses.replace(found, alternatives=others), "queries": q1 + q2})
@@ -192,14 +204,14 @@ def _polished(held, indices, touch, config: FastConfig, registrations: list[Regi
         model = held.entries[index].model
         t = in_model_units(touch, model)
         if model.kind == "mesh":
-            R, tr, error, q = solve(model, r.rotation[None], r.translation[None], t.joint_points,
+            R, tr, error, q = solve(t.exact(model), r.rotation[None], r.translation[None], t.joint_points,
                                     Criteria(config.polish_iterations, tolerance=config.tolerance,
                                              history=config.history))
             better = dataclasses.replace(_registration(model, t, R[0], tr[0], error[0], r.normal_sign),
                                          alternatives=r.alternatives) if error[0] < r.error else r
         else:
             better = dataclasses.replace(closedform_fast.polish(model, r, t.oriented(r.normal_sign),
-                                                                t.joint_points),
+                                                                t.joint_points, exact=t.exact(model)),
                                          normal_sign=r.normal_sign, scale=r.scale)
             q = config.polish_iterations * len(t.joint_points)
         out.append({"registration": better, "queries": q})
@@ -212,8 +224,8 @@ def _closed_form(held, indices, touch, config: FastConfig) -> list[dict]:
     for index in indices:
         entry = held.entries[index]
         t = in_model_units(touch, entry.model)
-        r = best_of_orientations(lambda g: closedform_fast.register(entry.model, entry.table, g, t.joint_points,
-                                                                    candidates=config.candidates), t,
-                                 entry.model.name)
+        r = best_of_orientations(lambda g, sign: closedform_fast.register(
+            entry.model, entry.table, g, t.joint_points, candidates=config.candidates, exact=t.exact(entry.model),
+            surface=t.on_surface(sign).joint_points), t, entry.model.name)
         out.append({"registration": r, "queries": config.candidates * 12 * len(t.joint_points)})
     return out

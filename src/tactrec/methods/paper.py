@@ -17,6 +17,17 @@ throughout: 3 points each side matches the mesh tables' scale on noise-free
 touches of fine scans (P3), but follows the noise of the paper's
 closed-form and Table 6 touches and falls inside one facet of a coarse
 scan, so it is an option, not the default.
+
+A touch with a round tip (:mod:`tactrec.tip`): the lookup takes the
+corrected curvatures and the steps take the curves moved onto the surface on
+the side tried (:meth:`tactrec.features.Touch.on_surface`), part (a) of the
+rule.  Part (b) the paper's steps do not allow: eq. 15 compares the data
+with plane sections of the mesh point by point, and the steepest descent on
+``E(u, v, phi)`` measures eq. 11 at the data, so both measure the moved
+points rather than the centres against the offset surface, and the error
+they report carries what the move left (about ``r`` times the error of the
+local fit's normals, largest at the curves' ends).  The probabilities are
+measured as for every method, from the centres against the offset.
 """
 
 from __future__ import annotations
@@ -76,12 +87,13 @@ def _register(entry, touch, config: PaperConfig) -> Registration:
     model = entry.model
     touch = in_model_units(touch, model)
     if model.kind == "mesh":
-        def one(g):
-            return mesh_paper.register(model, entry.table, g, touch.points, curves=touch.curves, delta=config.delta,
+        def one(g, sign):
+            s = touch.on_surface(sign)
+            return mesh_paper.register(model, entry.table, g, s.points, curves=s.curves, delta=config.delta,
                                        phi_step=config.phi_step, max_steps=config.max_steps)
     else:
-        def one(g):
-            return closedform_paper.register(model, entry.table, g, touch.points,
+        def one(g, sign):
+            return closedform_paper.register(model, entry.table, g, touch.on_surface(sign).points,
                                              delta=closedform_paper.DEFAULTS["delta"] if config.delta is None
                                              else config.delta, phi_samples=config.phi_samples,
                                              bisections=config.bisections, max_iterations=config.max_iterations)
@@ -110,7 +122,7 @@ class PaperMethod:
         """Every model at ``among`` (all when None) searched in full: the paper's method has no budget."""
         own = config.geometry(touch.data)          # this reading's estimate, once for every model
         if own is not None:
-            touch = dataclasses.replace(touch, estimate=own)
+            touch = touch.with_estimate(own)
         chosen = range(len(models)) if among is None else sorted(among)
         found = dict(zip(chosen, runner.map(_stage, chosen, touch, config)))
         return SearchOutcome([found[i] if i in found else Registration.rejection(e.name, NOT_SEARCHED)

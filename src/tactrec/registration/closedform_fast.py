@@ -13,6 +13,10 @@ Differences from the paper's Section 4.2 (:mod:`.closedform_paper`):
    is then the surface point nearest to the moved contact.
 
 The error is eq. 12's mean first-order distance, as in the paper.
+
+With a round tip (:mod:`tactrec.tip`) the rows and the first turn come from the
+data moved onto the surface (``surface``) and the corrected estimate, and the
+steps and the error from the centres against the offset surface (``exact``).
 """
 
 from __future__ import annotations
@@ -60,16 +64,20 @@ def _result(model, geometry, R, t, error, start, candidates) -> Registration | N
 def register(model: ClosedFormSurface, table: CurvatureTable, geometry: LocalGeometry, points: np.ndarray, *,
              candidates: int = DEFAULTS["candidates"], phi_samples: int = DEFAULTS["phi_samples"],
              bisections: int = DEFAULTS["bisections"], iterations: int = DEFAULTS["iterations"],
-             **_ignored) -> Registration:
-    """Register data ``points (m, 3)`` onto ``model`` from the rows nearest in curvature."""
+             exact=None, surface: np.ndarray | None = None, **_ignored) -> Registration:
+    """Register data ``points (m, 3)`` onto ``model`` from the rows nearest in curvature.  ``exact``:
+    what the steps measure the points against (default ``model``; the offset surface for a tip's
+    centres), ``surface``: the points moved onto the surface (default ``points``), which pose the
+    first turn."""
     idx, _ = table.nearest(geometry.k1, geometry.k2, candidates)
     if len(idx) == 0:
         return Registration.rejection(model.name, "empty table")
     x = np.asarray(points, dtype=np.float64)
-    if np.max(np.linalg.norm(x - geometry.contact, axis=1)) > model.size:
+    on = x if surface is None else np.asarray(surface, dtype=np.float64)
+    if np.max(np.linalg.norm(on - geometry.contact, axis=1)) > model.size:
         return Registration.rejection(model.name, "the touch is larger than the model")
     L = local_frame(geometry.normal, geometry.directions[0])
-    problem = Superposition(model, (x - geometry.contact) @ L.T)
+    problem = Superposition(model, (on - geometry.contact) @ L.T)
     uv0 = table.samples.sites[idx]
     phi0, E0 = problem.initial_phi(uv0, samples=phi_samples, bisections=bisections)
     jet = model.frame_jet(uv0[:, 0], uv0[:, 1])
@@ -79,7 +87,7 @@ def register(model: ClosedFormSurface, table: CurvatureTable, geometry: LocalGeo
     uv0, phi0 = uv0[usable], phi0[usable]
     R = jet.frame[usable] @ rotations_z(phi0) @ L
     t = jet.point[usable] - np.einsum("hij,j->hi", R, geometry.contact)
-    R, t, error = refine(model, R, t, x, iterations=iterations)
+    R, t, error = refine(model if exact is None else exact, R, t, x, iterations=iterations)
     for b in np.argsort(error)[:5]:
         if not np.isfinite(error[b]):
             break
@@ -90,9 +98,9 @@ def register(model: ClosedFormSurface, table: CurvatureTable, geometry: LocalGeo
 
 
 def polish(model: ClosedFormSurface, registration: Registration, geometry: LocalGeometry, points: np.ndarray, *,
-           iterations: int = 20, **_ignored) -> Registration:
-    """Continue the Gauss-Newton refinement of ``registration``."""
-    R, t, error = refine(model, registration.rotation[None], registration.translation[None],
+           iterations: int = 20, exact=None, **_ignored) -> Registration:
+    """Continue the Gauss-Newton refinement of ``registration`` (``exact`` as for :func:`register`)."""
+    R, t, error = refine(model if exact is None else exact, registration.rotation[None], registration.translation[None],
                          np.asarray(points, dtype=np.float64), iterations=iterations)
     if not error[0] < registration.error:
         return registration

@@ -63,6 +63,11 @@ refinement (more searches only in step 5):
    distances to the points of all touches kept, under its joint pose, and
    from the lines the sensor followed without meeting anything
    (:meth:`Session.add_miss`, :mod:`.lines`).
+
+Touches of round tips (:mod:`tactrec.tip`), of one radius or several: each
+touch's distances are measured against the model offset by its own tip; step
+5 screens the other touches moved onto the surface (by their own estimates).
+A missed line is measured against the model itself (:mod:`.lines`).
 """
 
 from __future__ import annotations
@@ -80,7 +85,7 @@ from ..linalg import clearly_less
 from ..probability import evidence, fit_limit, residuals
 from ..recognition import FLOOR
 from . import family as _family
-from .fit import fit_stage
+from .fit import fit_stage, joint_model
 from .lines import miss_excess
 from .record import TouchRecord, allowed_fit, fits
 from .result import Hypothesis, SessionResult
@@ -146,6 +151,11 @@ class Session:
         return [r.features for r in self.records]
 
     @property
+    def tips(self) -> np.ndarray:
+        """Each touch's tip radius ``(N,)``, data units."""
+        return np.array([r.tip for r in self.records], dtype=np.float64)
+
+    @property
     def world(self) -> list:
         """Each touch's data in the world frame, in order."""
         return [r.world for r in self.records]
@@ -203,7 +213,9 @@ class Session:
         by_name = {e.name: e.model for e in self.recognizer.models}
         x = np.concatenate([self.records[i].points for i in keep])
         curves = [len(c) for i in keep for c in self.features[i].curves]
-        signed = [residuals(by_name[h.model], h.rotation, h.translation, x, h.scale) for h in ranked]
+        points, use = [r.points for r in self.records], np.isin(np.arange(len(self.records)), keep)
+        signed = [residuals(joint_model(by_name[h.model], points, self.tips, h.scale, use), h.rotation,
+                            h.translation, x, h.scale) for h in ranked]
         misses = None
         if self.misses:
             step = 0.5 * float(np.median([self.records[i].world.spacing for i in keep]))
@@ -237,9 +249,12 @@ class Session:
             among = self._unexplained(slipped, every=explained)
             if not among:
                 return
-            context = [c for i in use if i != start for c in self.records[i].world.curves]
+            others = [self.records[i] for i in use if i != start]
+            context = [c for r in others for c in r.world.curves]
+            tips, surface = [r.tip for r in others for _ in r.world.curves], [c for r in others for c in r.surface_curves]
             found = self._timed("context", self.recognizer.recognize, self.records[start].world, context=context,
-                                among=among, fit=fit, budget=None if np.isinf(budget) else int(budget))
+                                among=among, fit=fit, budget=None if np.isinf(budget) else int(budget),
+                                context_tips=tips, context_surface=surface)
             budget -= found.work
             self.searches.append(found)
             self.result = self._joint_fit(found)
@@ -368,8 +383,9 @@ class Session:
                 entries.append((i, e))
                 items.append((np.stack([p[0] for p in poses]), np.stack([p[1] for p in poses]), poses[0][2]))
         weight = np.array([len(f.points) for f in self.features]) * use
+        tips = self.tips if np.any(self.tips) else None
         fitted = self.recognizer.runner.map(fit_stage, [i for i, _ in entries], [f.points for f in self.features],
-                                            weight, items=items)
+                                            weight, tips, items=items)
         for (_, e), (_, _, scale), poses in zip(entries, items, fitted):
             best = None
             for R, t, per in poses:

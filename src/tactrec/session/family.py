@@ -12,7 +12,7 @@ import numpy as np
 
 from ..linalg import gram
 from ..registration.solver import jacobian
-from .fit import per_touch, refine
+from .fit import joint_model, per_touch, refine
 
 __all__ = ["free_poses", "distinct", "FAMILY", "APART", "FREE", "FAMILY_ITERATIONS"]
 
@@ -52,8 +52,9 @@ def free_poses(session, model, best, use: np.ndarray, x: np.ndarray) -> np.ndarr
             t.append(dR @ (best.translation - q) + q + a * slide)
     if not R:
         return distinct(session, best, np.empty((0, 3, 3)), np.empty((0, 3)))
-    R, t = refine(model, np.array(R), np.array(t), x, FAMILY_ITERATIONS)
-    per = per_touch(model, R, t, [f.points for f in session.features], best.scale)
+    points, tips = [f.points for f in session.features], session.tips
+    R, t = refine(joint_model(model, points, tips, best.scale, use), np.array(R), np.array(t), x, FAMILY_ITERATIONS)
+    per = per_touch(model, R, t, points, best.scale, tips)
     fits = session.consistent(best.model, per)[:, use].all(axis=1)
     return distinct(session, best, R[fits], t[fits])
 

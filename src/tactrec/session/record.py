@@ -44,6 +44,18 @@ class TouchRecord:
         """The touch's points ``(m, 3)``, world frame."""
         return self.own.touch.points
 
+    @property
+    def tip(self) -> float:
+        """The touch's tip radius, data units (0: points on the surface; :mod:`tactrec.tip`)."""
+        return self.own.touch.tip
+
+    @property
+    def surface_curves(self) -> tuple:
+        """The touch's curves moved onto the surface on the side of its own normal (:mod:`tactrec.tip`;
+        the curves themselves without a tip), world frame."""
+        features = self.own.touch
+        return features.on_surface(features.sides[0][0]).data.curves
+
     def own_error(self, model: str | None = None) -> float:
         """The touch's own search's error (data units) on ``model`` (None: on its best model); 0 where
         that search registered none."""
