@@ -132,6 +132,12 @@ class Recognition:
         return r is None or not r.spread > LOCATED * r.error
 
     @property
+    def outliers(self) -> int:
+        """How many of the touch's points were set aside as off their curve's trace
+        (:mod:`tactrec.outliers`; 0 without a touch)."""
+        return int(self.touch.outliers) if self.touch is not None else 0
+
+    @property
     def registration(self) -> Registration | None:
         return self.ranking[0] if self.ranking and self.ranking[0].ok else None
 
@@ -150,6 +156,7 @@ class Recognition:
             "ambiguous": self.ambiguous,
             "located": self.located,
             "settled": self.settled,
+            "outliers": self.outliers,
             "seconds": round(self.seconds, 4),
         }
 
