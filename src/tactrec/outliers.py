@@ -44,6 +44,19 @@ corners.)  A set-aside
 point is gone for every model alike, so every registration is compared on
 the same points.
 
+The ends.  Where a touch had outliers, so that its sensor slips, the
+:data:`ENDS` points at each end of a curve that the spike residual could
+not judge are judged against the registration instead: under the best
+model's pose (the search on the points kept), an end point whose distance
+to the model exceeds ``k`` times the touch's noise sigma (third
+differences of the points kept) -- the same ``k``: Gaussian noise passes
+it with probability below :data:`ALPHA` -- and :data:`FLOOR` steps is set
+aside too, and the search runs again on the points left
+(:func:`ends_off`, :meth:`tactrec.recognition.Recognizer.recognize`).  A
+touch without outliers is never judged this way, so that a model the
+search got wrong, which leaves a clean curve's ends off, sets nothing
+aside.
+
 A touch with nothing set aside is used exactly as given.  A touch whose
 outliers leave a curve fewer than :data:`~tactrec.io.touch.MIN_POINTS`
 points, or fewer than half its points (then the curve is mostly off its
@@ -62,10 +75,12 @@ import numpy as np
 from .errors import InputError
 from .io.touch import MIN_POINTS, TactileData
 
-__all__ = ["ALPHA", "FLOOR", "spike_residuals", "bound", "flagged", "kept"]
+__all__ = ["ALPHA", "FLOOR", "ENDS", "spike_residuals", "bound", "flagged", "kept", "ends_off", "without", "judge_ends"]
 
 #: the chance that Gaussian noise sets any point of a touch aside
 ALPHA = 1e-6
+#: how many points at each end of a curve the spike residual does not judge (one side only)
+ENDS = 3
 #: the least bound, in median steps between a curve's points: what noise-free curves leave their prediction by
 FLOOR = 1.25
 
@@ -90,7 +105,8 @@ def _one_side(x: np.ndarray, step: int, order: int = 2) -> np.ndarray:
             c = x[i + 3 * step]
             h2 = np.sqrt(np.sum((b - c) ** 2, axis=1))
             tb, tc = -h1, -h1 - h2
-            la, lb, lc = (s - tb) * (s - tc) / (tb * tc), s * (s - tc) / (tb * (tb - tc)), s * (s - tb) / (tc * (tc - tb))
+            la = (s - tb) * (s - tc) / (tb * tc)
+            lb, lc = s * (s - tc) / (tb * (tb - tc)), s * (s - tb) / (tc * (tc - tb))
             da, db, dc = (2 * s - tb - tc) / (tb * tc), (2 * s - tc) / (tb * (tb - tc)), (2 * s - tb) / (tc * (tc - tb))
             p = la[:, None] * a + lb[:, None] * b + lc[:, None] * c
             t = da[:, None] * a + db[:, None] * b + dc[:, None] * c
@@ -137,6 +153,13 @@ def kept(data: TactileData) -> tuple[TactileData, int]:
     count = int(sum(int(m.sum()) for m in marks))
     if count == 0:
         return data, 0
+    return without(data, marks, count), count
+
+
+def without(data: TactileData, marks: list[np.ndarray], count: int) -> TactileData:
+    """``data`` without the points ``marks`` (per curve, ``(n_i,)`` bool), ``count`` of which are outliers in
+    all (for the message); an :class:`InputError` naming ``data.source`` where a curve keeps fewer than
+    :data:`~tactrec.io.touch.MIN_POINTS` points or fewer than half its points."""
     curves = []
     for i, (c, m) in enumerate(zip(data.curves, marks)):
         left = np.asarray(c, dtype=np.float64)[~m]
@@ -145,4 +168,40 @@ def kept(data: TactileData) -> tuple[TactileData, int]:
                              f"{len(left)} of {len(m)} points, at least {MIN_POINTS} and half are needed",
                              data.source)
         curves.append(left)
-    return dataclasses.replace(data, curves=tuple(curves)), count
+    return dataclasses.replace(data, curves=tuple(curves))
+
+
+def ends_off(curves, residuals: np.ndarray, noise: float, step: float) -> list[np.ndarray]:
+    """Per curve of ``curves`` (``(n_i, 3)`` each), which of its :data:`ENDS` points at either end lie off
+    the registered model (module text): ``residuals (sum n_i,)`` their signed distances under the best
+    pose, ``noise`` the touch's sigma and ``step`` its median step between points."""
+    sizes = [len(c) for c in curves]
+    k = np.sqrt(2.0 * np.log(max(sum(sizes), 1) / ALPHA))
+    limit = max(k * noise, FLOOR * step)
+    marks, start = [], 0
+    for n in sizes:
+        end = np.zeros(n, dtype=bool)
+        end[:ENDS], end[max(n - ENDS, 0):] = True, True
+        marks.append(end & (np.abs(residuals[start:start + n]) > limit))
+        start += n
+    return marks
+
+
+def judge_ends(touch, outcome, best, residuals, estimation: dict, search):
+    """The touch (a :class:`~tactrec.features.Touch` with outliers) and its search's ``outcome`` again
+    without the curves' end points off the ``best`` registration (:func:`ends_off`; ``residuals(best,
+    touch)`` their signed distances), ``search(touch)`` the search on the points left (its work added
+    to the first's); as they were where none is off or nothing was registered.  ``estimation``: the
+    keywords of :meth:`~tactrec.features.Touch.from_data`."""
+    from .features import Touch
+
+    if best is None:
+        return touch, outcome
+    marks = ends_off(touch.curves, residuals(best, touch), touch.noise, touch.data.spacing)
+    off = int(sum(int(m.sum()) for m in marks))
+    if off == 0:
+        return touch, outcome
+    again = Touch.from_data(without(touch.data, marks, touch.outliers + off), **estimation)
+    again = dataclasses.replace(again, outliers=touch.outliers + off + again.outliers)
+    found = search(again)
+    return again, dataclasses.replace(found, work=found.work + outcome.work)
