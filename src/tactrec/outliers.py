@@ -15,14 +15,14 @@ one side: the quadratic through them in chord length, extrapolated by the
 chord ``|x_i - x_{i-1}|`` (or ``|x_i - x_{i+1}|``); its residual on that side
 is ``x_i`` minus the prediction, across the extrapolated tangent (a 2-vector:
 in the curve's plane and out of it; a point moved along the curve is not off
-the trace).  The point's residual ``r_i`` is the smaller of its two sides' (a curve's
-first and last three points have one side only, which cannot tell a spike
-from a turn of the curve, and are not judged).  A spike is off both sides' predictions; a
-corner (a sharp edge, a mesh section's facets) lies on the piece of the curve
-on either side of it, so one side predicts it; and the neighbours of a spike
-are predicted by their other side, so one spike does not mark its neighbours.
-Outliers are isolated points: set-aside points are never more than a few per
-cent of a touch.
+the trace).  The point's residual ``r_i`` is the smaller of its two
+sides' (a curve's first and last three points have one side only, which
+cannot tell a spike from a turn of the curve, and are not judged here).  A
+spike is off both sides' predictions; a corner (a sharp edge, a mesh
+section's facets) lies on the piece of the curve on either side of it, so
+one side predicts it; and the neighbours of a spike are predicted by their
+other side, so one spike does not mark its neighbours.  The rule is made
+for isolated spikes, a few per cent of the points.
 
 The scale and the bound.  Under Gaussian noise of sigma per coordinate, each
 side's residual is an isotropic 2-vector of sigma ``s = sigma sqrt(1 + 9 + 9 +
@@ -40,9 +40,9 @@ mesh section's facets, a surface's third derivative), and the bound is never
 below :data:`FLOOR` times the touch's median step between points: an
 outlier is off the trace by more than a step.  (Sections of the YCB scans,
 noise-free, leave their prediction by up to 0.7 of a step at the facets'
-corners.)  A set-aside
-point is gone for every model alike, so every registration is compared on
-the same points.
+corners.)  A set-aside point is gone for every model alike, so every
+registration is compared on the same points; the solver's steps and the
+errors are the plain ones, on the points kept (a hard-rejecting loss).
 
 The ends.  Where a touch had outliers, so that its sensor slips, the
 :data:`ENDS` points at each end of a curve that the spike residual could
