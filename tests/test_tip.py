@@ -109,7 +109,7 @@ def test_small_meshes_touched_with_a_tip_are_recognised(small, r):
                     continue
                 right += 1
                 reg, touch = result.registration, result.touch
-                moved = data.points @ reg.rotation.T + reg.translation
+                moved = touch.points @ reg.rotation.T + reg.translation          # the points kept (tactrec.outliers)
                 offset_error = float(np.mean(np.abs(entry.model.planes(moved)[0] - r)))
                 assert np.isclose(offset_error, reg.error, rtol=1e-6, atol=1e-12)
                 assert offset_error <= 2.0 * fit_limit(touch, recognizer.floor)

@@ -14,6 +14,11 @@ take its points moved onto the surface (:meth:`Touch.on_surface`, one copy
 per side of the normal tried), and every exact distance is measured from its
 points, the centres, against the model offset by the tip
 (:meth:`Touch.exact`).
+
+Points a sensor recorded off its curve's trace (slips, spikes) are set aside
+first (:mod:`tactrec.outliers`): everything here, the estimate, the noise,
+the points every registration and probability measures, is of the points
+kept.
 """
 
 from __future__ import annotations
@@ -26,6 +31,7 @@ import numpy as np
 from .errors import InputError
 from .estimation import LocalGeometry, estimate, noise_level
 from .io.touch import TactileData
+from .outliers import kept
 from .tip import EDGE, corrected, offset, surface_curves
 
 __all__ = ["Touch", "subset"]
@@ -68,6 +74,9 @@ class Touch:
         The tip's radius of each context curve (data units; empty: all 0).
     context_surface : tuple of (n_i, 3) arrays
         The context curves moved onto the surface (data units; empty: the context as given).
+    outliers : int
+        How many of the points as read were set aside as off their curve's trace
+        (:mod:`tactrec.outliers`); ``data`` holds the points kept.
     """
 
     data: TactileData
@@ -80,13 +89,17 @@ class Touch:
     sides_data: tuple = ()
     context_tips: tuple = ()
     context_surface: tuple = ()
+    outliers: int = 0
 
     @classmethod
     def from_data(cls, data: TactileData, *, window: int | str | None = "auto", degree: int = 3,
                   curvature_method: str = "auto") -> "Touch":
+        """The touch of ``data``: its points off their curves' traces set aside (:mod:`tactrec.outliers`;
+        an :class:`InputError` where too few are left), then the estimate and the noise of those kept."""
+        data, count = kept(data)
         geometry = estimate(data, window=window, degree=degree, method=curvature_method)
         noise = float(np.median([noise_level(np.asarray(c, dtype=np.float64)) for c in data.curves]))
-        return cls(data, geometry, 1.0, noise).with_estimate(geometry)
+        return cls(data, geometry, 1.0, noise, outliers=count).with_estimate(geometry)
 
     def with_estimate(self, geometry: LocalGeometry) -> "Touch":
         """The same touch with the estimate of its data ``geometry`` (data units): with a tip, the

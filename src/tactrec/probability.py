@@ -49,6 +49,9 @@ unknown less likely.  A line the sensor followed without meeting anything
 must not cut into the surface (:mod:`tactrec.session.lines`).
 
 Nothing comes from a simulation setting: the scatter is the touch's own.
+The residuals are those of the points a touch kept: points off their
+curve's trace (:mod:`tactrec.outliers`) are no evidence for or against
+any model.
 Models the search rejected or deferred have no probability; the accepted
 models' probabilities and ``unknown``'s sum to one.  The replicates are drawn
 from a fixed seed and averaged without BLAS, so the same touch gives the same

@@ -27,6 +27,7 @@ from .estimation import LocalGeometry
 from .features import Touch
 from .io.touch import TactileData
 from .methods import DEFAULT_METHOD, get_method
+from .outliers import judge_ends
 from .probability import AMBIGUOUS, UNKNOWN_PRIOR, Evidence, evidence, fit_limit, residuals
 from .registration.result import Registration
 from .tables import CurvatureTable
@@ -132,6 +133,11 @@ class Recognition:
         return r is None or not r.spread > LOCATED * r.error
 
     @property
+    def outliers(self) -> int:
+        """How many of the touch's points were set aside (:mod:`tactrec.outliers`; 0 without a touch)."""
+        return int(self.touch.outliers) if self.touch is not None else 0
+
+    @property
     def registration(self) -> Registration | None:
         return self.ranking[0] if self.ranking and self.ranking[0].ok else None
 
@@ -150,6 +156,7 @@ class Recognition:
             "ambiguous": self.ambiguous,
             "located": self.located,
             "settled": self.settled,
+            "outliers": self.outliers,
             "seconds": round(self.seconds, 4),
         }
 
@@ -215,8 +222,7 @@ class _Serial:
         return stage(self.held, list(indices), *args, list(items))
 
 
-#: in a worker process only: the models it was forked with (set by the pool's initializer)
-_WORKER: list = []
+_WORKER: list = []            # in a worker process only: the models it was forked with (the pool's initializer)
 
 
 def _start_worker(held: _Held) -> None:
@@ -354,8 +360,12 @@ class Recognizer:
             if unknown:
                 raise InputError(f"no model named {unknown[0]!r} among the recognizer's", "among")
             chosen = [i for i, entry in enumerate(self.models) if entry.name in set(among)]
-        outcome = self.method.search(touch, self.models, self.config, self.runner, among=chosen,
-                                     budget=budget)
+        outcome = self.method.search(touch, self.models, self.config, self.runner, among=chosen, budget=budget)
+        if touch.outliers and not len(context):         # a slipping sensor: its curves' ends judged by the fit
+            def again(t):
+                return self.method.search(t, self.models, self.config, self.runner, among=chosen, budget=budget)
+            best = min((r for r in outcome.ranking if r.ok), key=_rank_key, default=None)
+            touch, outcome = judge_ends(touch, outcome, best, self._residuals, self.estimation, again)
         ranking = sorted(outcome.ranking, key=_rank_key)
         best = ranking[0].model if ranking and ranking[0].ok else None
         ok = [r for r in ranking if r.ok]
@@ -379,7 +389,6 @@ class Recognizer:
         offset by each point's tip: :mod:`tactrec.tip`)."""
         model = touch.in_units(r.scale).exact(self._by_name[r.model].model)
         return residuals(model, r.rotation, r.translation, touch.joint_points, r.scale)
-
 
 
 def recognize(data: TactileData, models: Iterable[ModelEntry], *, method: str = DEFAULT_METHOD, workers: int = 1,

@@ -250,9 +250,11 @@ class Session:
             if not among:
                 return
             others = [self.records[i] for i in use if i != start]
-            context = [c for r in others for c in r.world.curves]
-            tips, surface = [r.tip for r in others for _ in r.world.curves], [c for r in others for c in r.surface_curves]
-            found = self._timed("context", self.recognizer.recognize, self.records[start].world, context=context,
+            context = [c for r in others for c in r.features.data.curves]          # the points each kept
+            tips = [r.tip for r in others for _ in r.features.data.curves]
+            surface = [c for r in others for c in r.surface_curves]
+            kept = self.records[start].features.data
+            found = self._timed("context", self.recognizer.recognize, kept, context=context,
                                 among=among, fit=fit, budget=None if np.isinf(budget) else int(budget),
                                 context_tips=tips, context_surface=surface)
             budget -= found.work

@@ -1,0 +1,136 @@
+"""Points off their curve's trace (tactrec.outliers): set aside, counted, and refused when too many."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+
+from tactrec.cli import main
+from tactrec.features import Touch
+from tactrec.io.touch import save_touch
+from tactrec.recognition import Recognizer
+from tactrec.sensor import Imperfections
+from tactrec.simulation import simulate_random_touch
+from tactrec.outliers import flagged
+from test_fast import _small_meshes
+
+TOUCH = dict(points=41, spacing=0.3, angle=60.0)
+
+
+@pytest.fixture(scope="module")
+def small():
+    return _small_meshes()
+
+
+def _touch(model, *seed, outliers=0.0, noise=0.0, outward=True):
+    imperfections = Imperfections(outliers=outliers) if outliers else None
+    return simulate_random_touch(model, rng=np.random.default_rng(list(seed)), noise=noise, noise_kind="gaussian",
+                                 outward=outward, imperfections=imperfections, **TOUCH)
+
+
+def test_clean_touches_keep_every_point(small):
+    """24 clean touches (noise 0, 0.02 and 0.05 mm, with and without outward) of the four small meshes:
+    nothing set aside, and the touch is the data as read."""
+    for m, entry in enumerate(small):
+        for k, (noise, outward) in enumerate([(0.0, True), (0.0, False), (0.02, True), (0.02, False),
+                                              (0.05, True), (0.05, False)]):
+            data = _touch(entry.model, 5, m, k, noise=noise, outward=outward)
+            touch = Touch.from_data(data)
+            assert touch.outliers == 0 and touch.data is data
+
+
+def test_the_points_set_aside_are_the_outliers(small):
+    """24 touches with 3% and 5% outliers: at least 70% of the outliers injected are set aside (a
+    curve's first and last three points are not judged, 6 of 41), and at most one point in ten set
+    aside was not one."""
+    injected = hit = marked = 0
+    for share in (0.03, 0.05):
+        for m, entry in enumerate(small):
+            for k in range(3):
+                data = _touch(entry.model, 6, m, k, outliers=share)
+                truth = {tuple(p) for p in data.meta["truth"]["imperfections"]["outlier_points"]}
+                got = {(i, int(j)) for i, mk in enumerate(flagged(data)) for j in np.flatnonzero(mk)}
+                injected, hit, marked = injected + len(truth), hit + len(truth & got), marked + len(got)
+    assert injected >= 100
+    assert hit >= 0.7 * injected
+    assert marked - hit <= 0.1 * marked
+
+
+def test_touches_with_outliers_are_recognised(small):
+    """The same four meshes, 3 touches each at 0, 3% and 5% outliers (36): with outliers at least as many
+    right as clean, less one per setting; the result counts the points set aside (0 when clean), in
+    its JSON and as ``outliers``, and its error is over the points kept."""
+    with Recognizer(small) as recognizer:
+        right = {}
+        for share in (0.0, 0.03, 0.05):
+            right[share] = 0
+            for m, entry in enumerate(small):
+                for k in range(3):
+                    data = _touch(entry.model, 7, m, k, outliers=share, noise=0.01)
+                    result = recognizer.recognize(data)
+                    assert result.to_json()["outliers"] == result.outliers
+                    assert result.outliers == len(data.points) - len(result.touch.points)
+                    if share == 0.0:
+                        assert result.outliers == 0
+                    else:
+                        assert result.outliers > 0
+                    right[share] += result.best == entry.name
+    assert right[0.0] >= 11
+    assert right[0.03] >= right[0.0] - 1 and right[0.05] >= right[0.0] - 1
+
+
+def test_a_touch_mostly_off_its_traces_is_refused(small, tmp_path, capsys):
+    """A curve whose points are mostly moved off its trace: one line naming the file, exit status 2."""
+    data = _touch(small[0].model, 8, 0)
+    rng = np.random.default_rng(8)
+    curves = [np.array(c) for c in data.curves]
+    curves[1][4:-4] += rng.normal(0.0, 2.0, size=curves[1][4:-4].shape)
+    path = tmp_path / "spiky.json"
+    save_touch(dataclasses.replace(data, curves=tuple(curves), meta={}), path)
+    model = tmp_path / "egg.obj"
+    import trimesh
+
+    trimesh.Trimesh(small[0].model.vertices, small[0].model.faces).export(model)
+    rc = main(["recognize", str(path), "--models", str(model), "--quiet"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1
+    assert str(path) in err[0] and "outliers" in err[0] and "curve 2" in err[0]
+
+
+def test_the_recognition_json_says_how_many(small, tmp_path, capsys):
+    """``tactrec recognize --json`` on a touch with 5% outliers: ``outliers`` in the JSON, as counted."""
+    data = _touch(small[3].model, 9, 0, outliers=0.05)
+    path = tmp_path / "touch.json"
+    save_touch(data, path)
+    model = tmp_path / "ring.obj"
+    import trimesh
+
+    trimesh.Trimesh(small[3].model.vertices, small[3].model.faces).export(model)
+    assert main(["recognize", str(path), "--models", str(model), "--json", "--quiet"]) == 0
+    out = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    injected = len(data.meta["truth"]["imperfections"]["outlier_points"])
+    spikes = sum(int(mk.sum()) for mk in flagged(data))
+    assert 0 < spikes <= out["outliers"] <= injected + 2
+
+
+def test_a_slipping_sensors_curve_ends_are_judged_by_the_fit(small):
+    """A clean touch of the egg with one spike inside a curve and the first point of another curve moved
+    2 mm along the normal (a curve's end has one side only; the spike rule does not judge it): the
+    spike and that end point are set aside, 2 in all, and the error is a fit's (under 0.01 mm).
+    Without the spike, the sensor is not known to slip, and the end point is kept."""
+    data = _touch(small[0].model, 10, 0)
+    normal = np.asarray(data.outward) / np.linalg.norm(data.outward)
+    curves = [np.array(c) for c in data.curves]
+    curves[1][0] += 2.0 * normal
+    only_end = dataclasses.replace(data, curves=tuple(c.copy() for c in curves))
+    curves[2][12] += 1.5 * normal
+    both = dataclasses.replace(data, curves=tuple(curves))
+    with Recognizer(small) as recognizer:
+        result = recognizer.recognize(both)
+        assert result.best == "egg" and result.outliers == 2
+        assert result.registration.error < 0.01
+        kept = recognizer.recognize(only_end)
+        assert kept.outliers == 0 and len(kept.touch.points) == len(data.points)
