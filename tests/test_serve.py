@@ -165,3 +165,32 @@ def test_a_service_request_is_the_python_call_and_a_failed_add_changes_nothing(d
         assert "error" in service.answer(json.dumps({"id": 11, "session": "a", "add": dict(touches[0], units="cm")}))
         after = [service.answer(json.dumps({"id": 9, "session": n, "next": {"radius": 20}})) for n in ("a", "b")]
         assert after == before and len(service.sessions["a"].records) == 2
+
+
+def test_an_add_that_fails_midway_leaves_the_session_as_it_was(db, monkeypatch):
+    """Session.add restores the session when it raises after the touch was recorded (here the joint
+    fit, made to fail on the third add): the same touches, result and next proposal as before.  A
+    number too large for a float, even as an id, and a missed line in other units than the
+    session's are error answers, and every answer is strict JSON."""
+    touches = _session_touches(db, 3)
+    with Recognizer(db) as recognizer:
+        service = Service(recognizer)
+        for i, t in enumerate(touches[:2]):
+            assert "error" not in service.answer(json.dumps({"id": i, "session": "s", "add": t}))
+        session = service.sessions["s"]
+        before = session.result
+        want = service.answer(json.dumps({"id": 2, "session": "s", "next": {"radius": 20}}))
+
+        def broken(*args, **kwargs):
+            raise RuntimeError("joint fit failed")
+
+        monkeypatch.setattr(session, "_joint_fit", broken)
+        got = service.answer(json.dumps({"id": 3, "session": "s", "add": touches[2]}))
+        assert "internal error" in got["error"]
+        monkeypatch.undo()
+        assert len(session.records) == 2 and session.result is before
+        assert service.answer(json.dumps({"id": 2, "session": "s", "next": {"radius": 20}})) == want
+        assert "too large" in service.answer('{"id": 1e999, "session": "s", "close": true}')["error"]
+        missed = {"missed": {"start": [0, 0, 100], "direction": [0, 0, -1], "length": 0.05}, "units": "m"}
+        assert "missed line is in 'm'" in service.answer(json.dumps({"id": 4, "session": "s", "add": missed}))["error"]
+        assert session.result.missed == 0

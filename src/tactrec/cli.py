@@ -291,7 +291,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     from .cli_session import add_serve_parser
 
-    p = add_serve_parser(sub, mesh_options=_mesh_options, methods=METHODS, default_method=DEFAULT_METHOD)
+    p = add_serve_parser(sub, count=_count, mesh_options=_mesh_options, methods=METHODS, default_method=DEFAULT_METHOD)
     p.add_argument("--delta", type=_positive, help="lookup tolerance on (k1, k2), 1/model units (method paper)")
     p.add_argument("--budget", type=_count(1), help="the search's budget per model and normal tried (method fast)")
     unknown_prior_option(p)

@@ -117,14 +117,14 @@ def cmd_serve(args, *, open_models, options, warn) -> int:
     return 0
 
 
-def add_serve_parser(sub, *, mesh_options, methods, default_method):
+def add_serve_parser(sub, *, count, mesh_options, methods, default_method):
     p = sub.add_parser("serve", help="keep a database loaded and answer JSON requests, one per line, on "
                        "standard input and output (docs/formats.md)")
     p.add_argument("--db", metavar="DB", help="database built by 'tactrec build'")
     p.add_argument("--models", nargs="+", metavar="MODEL", help="model files or built-in names, instead of --db")
     p.add_argument("--method", choices=sorted(methods), default=default_method,
                    help=f"registration method (default {default_method})")
-    p.add_argument("--seed", type=int, default=0, help="next's seed where a request gives none (default 0)")
+    p.add_argument("--seed", type=count(0), default=0, help="next's seed where a request gives none (default 0)")
     mesh_options(p)
     p.add_argument("--quiet", action="store_true", help="nothing on standard error but errors")
     return p

@@ -124,6 +124,8 @@ class Service:
         session = self.sessions.get(name)
         units = session.records[0].given.data.units if session is not None and session.records else None
         touch = parse_session_touch(item, source, units)
+        if isinstance(touch, SessionMiss) and units is not None and touch.units not in (None, units):
+            raise InputError(f"this missed line is in {touch.units!r}, the session in {units!r}", source)
         if session is None:
             if isinstance(touch, SessionMiss):
                 raise InputError("a session opens with a touch that met the object, not a missed line", source)
@@ -173,5 +175,10 @@ def serve(recognizer, stdin, stdout, *, seed: int = 0) -> int:
             continue
         else:
             out = service.answer(line)
-        stdout.write(json.dumps(out) + "\n")
+        try:
+            text = json.dumps(out, allow_nan=False)
+        except ValueError:                            # a number JSON cannot carry: never a line a client cannot read
+            text = json.dumps({"id": out.get("id"), "error": f"request {service.served}: the answer holds a "
+                               "number JSON cannot carry"})
+        stdout.write(text + "\n")
         stdout.flush()

@@ -33,7 +33,7 @@ def _quantiles(values) -> dict:
     return {"median": float(np.median(v)), "p95": float(np.percentile(v, 95)), "max": float(v.max())}
 
 
-def run(*, out: Path, instances: int, seed: int, jobs=None, quiet: bool = True, method: str = "fast", **_) -> dict:
+def run(*, out: Path, instances: int, seed: int, jobs=None, quiet: bool = True, **_) -> dict:
     from ..surfaces import BUILTIN_SETS
 
     names = BUILTIN_SETS["paper-fig11"]
@@ -63,7 +63,7 @@ def run(*, out: Path, instances: int, seed: int, jobs=None, quiet: bool = True, 
     overhead = _quantiles([r["overhead_ms"] for r in rows])
     recognition = _quantiles([r["seconds"] for r in rows])
     right = sum(r["recognized"] == r["model"] for r in rows)
-    table = {"benchmark": "serve", "method": method, "requests": len(rows), "seed": seed, "target_ms": TARGET_MS,
+    table = {"benchmark": "serve", "method": "fast", "requests": len(rows), "seed": seed, "target_ms": TARGET_MS,
              "overhead_ms": overhead, "recognition_seconds": recognition,
              "trip_seconds": _quantiles([r["trip_seconds"] for r in rows]), "right": right, "rows": rows}
     table["text"] = "\n".join([

@@ -203,7 +203,7 @@ def number(obj, what: str, source: str) -> float:
 
 def _read_text(path: Path) -> str:
     try:
-        text = path.read_text(encoding="utf-8")
+        text = path.read_text(encoding="utf-8-sig")             # a byte-order mark (spreadsheet exports) is read past
     except FileNotFoundError:
         raise InputError("no such file", path) from None
     except IsADirectoryError:
@@ -216,12 +216,19 @@ def _read_text(path: Path) -> str:
 
 
 def read_json(text: str, source: str):
-    """The JSON value of ``text``; ``NaN`` and ``Infinity``, which JSON does not have, are one line."""
+    """The JSON value of ``text``; ``NaN`` and ``Infinity``, which JSON does not have, and numbers too
+    large for a float (``1e999``) are one line."""
     def no_constant(name):
         raise InputError(f"not valid JSON: {name} is not a number", source)
 
+    def finite(text):
+        value = float(text)
+        if not math.isfinite(value):
+            raise InputError(f"the number {text[:20]} is too large", source)
+        return value
+
     try:
-        return json.loads(text, parse_constant=no_constant)
+        return json.loads(text, parse_constant=no_constant, parse_float=finite)
     except json.JSONDecodeError as exc:
         raise InputError(f"not valid JSON ({exc.msg} at line {exc.lineno} column {exc.colno})", source) from None
     except RecursionError:
