@@ -540,8 +540,7 @@ def test_a_random_next_touch_is_found_within_reach_on_a_large_object():
 
     start = min(centres[rng.integers(len(centres), size=40)], key=share)
     assert share(start) < 0.05, "the start is not a sparse one: the check below is weak"
-    session = SimpleNamespace(world=[SimpleNamespace(contact=start)], features=[None],
-                              recognizer=SimpleNamespace(estimation={}))
+    session = SimpleNamespace(contacts=lambda: np.array([start]), recognizer=SimpleNamespace(estimation={}))
     truth = (np.eye(3), np.zeros(3), 1.0)
     for seed in range(20):
         found = _next_touch("random", session, SimpleNamespace(model=model), truth, SPECS["hard-10"],
@@ -579,8 +578,8 @@ def test_the_bench_asks_next_again_when_its_touch_cannot_be_made(small):
             return proposals[min(len(asked), len(proposals)) - 1]
         return next_
 
-    session = SimpleNamespace(world=[SimpleNamespace(contact=frames[0].point)], features=[None],
-                              recognizer=SimpleNamespace(estimation={}), next=propose([bad, good]))
+    session = SimpleNamespace(contacts=lambda: np.array([frames[0].point]), recognizer=SimpleNamespace(estimation={}),
+                              next=propose([bad, good]))
     truth = (np.eye(3), np.zeros(3), 1.0)
     spec = dict(SPECS["hard-10"], noise=0.0)
     data, (R, t) = _next_touch("next", session, small[0], truth, spec, np.random.default_rng(0))

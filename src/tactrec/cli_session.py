@@ -6,9 +6,8 @@ import json
 import sys
 
 from .errors import InputError
-from .units import conversion
 
-from .service import DEFAULT_RADIUS_MM
+from .service import DEFAULT_RADIUS_MM, default_radius
 
 __all__ = ["recognize_session", "format_session", "cmd_next", "add_next_parser", "cmd_serve", "add_serve_parser",
            "DEFAULT_RADIUS_MM"]
@@ -45,10 +44,6 @@ def format_session(name: str, result) -> str:
     return "\n".join(lines)
 
 
-def _in_units(mm: float, units: str | None) -> float:
-    return mm * (conversion("mm", units) if units else 1.0)
-
-
 def cmd_next(args, *, open_models, options, warn) -> int:
     """``tactrec next SESSION --db DB``: where to touch next."""
     from .io.session import load_session
@@ -56,7 +51,7 @@ def cmd_next(args, *, open_models, options, warn) -> int:
 
     touches = load_session(args.session)
     units = next(t.data.units for t in touches if hasattr(t, "data"))
-    radius = args.radius if args.radius is not None else _in_units(DEFAULT_RADIUS_MM, units)
+    radius = args.radius if args.radius is not None else default_radius(units)
     db = open_models(db=args.db, models=args.models, warn=warn, quiet=args.quiet, units=args.units, scale=args.scale)
     workers = default_workers() if len(db) > 4 else 1
     with Recognizer(db, method=args.method, workers=workers, unknown_prior=args.unknown_prior,

@@ -37,12 +37,17 @@ from .io.session import SessionMiss, parse_session_touch
 from .io.touch import parse_touch, read_json
 from .units import conversion
 
-__all__ = ["Service", "serve", "MAX_LINE", "DEFAULT_RADIUS_MM"]
+__all__ = ["Service", "serve", "default_radius", "MAX_LINE", "DEFAULT_RADIUS_MM"]
 
 #: the longest request line read, bytes (a touch of a few thousand points is a few hundred kilobytes)
 MAX_LINE = 16 * 2 ** 20
 #: how far from an earlier contact ``next`` may propose a touch, millimetres (in the session's units)
 DEFAULT_RADIUS_MM = 40.0
+def default_radius(units: str | None) -> float:
+    """``next``'s default reach, :data:`DEFAULT_RADIUS_MM` in ``units`` (None: the models' own, taken as mm)."""
+    return DEFAULT_RADIUS_MM * (conversion("mm", units) if units else 1.0)
+
+
 #: what a request may hold beside its ``id``
 _KINDS = {"recognize": set(), "add": {"session"}, "next": {"session"}, "close": {"session"}}
 
@@ -141,8 +146,7 @@ class Service:
         if not isinstance(options, dict) or set(options) - {"radius", "angle", "seed"}:
             raise InputError("'next' is an object with at most 'radius', 'angle' and 'seed'", source)
         units = session.records[0].given.data.units
-        radius = _positive(options.get("radius", DEFAULT_RADIUS_MM * (conversion("mm", units) if units else 1.0)),
-                           "radius", source)
+        radius = _positive(options.get("radius", default_radius(units)), "radius", source)
         angle = _positive(options.get("angle", 60.0), "angle", source)
         seed = options.get("seed", self.seed)
         if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:

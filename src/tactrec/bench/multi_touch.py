@@ -164,8 +164,7 @@ def _next_touch(strategy, session, entry, world2model, spec, rng):
     random one is drawn again, and ``next`` is asked again, as a robot whose touch failed would."""
     points = int(round(spec["length"] / SPACING)) + 1
     R, t, _ = world2model
-    contacts = np.array([w.contact if w.contact is not None else f.geometry.contact
-                         for w, f in zip(session.world, session.features)])
+    contacts = session.contacts()
     drawn = 0
     for _ in range(ATTEMPTS):
         if strategy == "next":

@@ -42,7 +42,7 @@ the currency of the probabilities (:mod:`tactrec.probability`): how much the
 session's mean distance on ``M`` would rise over the truth's, each point's
 offset ``e`` adding the folded normal's mean at ``e`` less the half-normal's
 (:func:`~tactrec.proposal.gain.excess`), in standard errors of a difference of two such means
-(``z_iM``, :func:`_separation`).  The noise sigma is the session's: the
+(``z_iM``, :func:`~tactrec.proposal.gain.separation`).  The noise sigma is the session's: the
 touches' own, or the best joint fit's if that is larger.  After the touch,
 model ``M``'s probability is weighted by ``exp(-z_iM^2 / 2)``, the true
 model's by 1.  The expected gain is the entropy of the models' probabilities
@@ -210,8 +210,7 @@ def _locate(session, leading: list, *, radius: float, angle: float):
     h = leading[0]
     model = models[h.model]
     x = np.concatenate([session.features[i].points for i in session.kept()])
-    contacts = np.array([w.contact if w.contact is not None else f.geometry.contact
-                         for w, f in zip(session.world, session.features)])
+    contacts = session.contacts()
     gap = np.linalg.norm(x[:, None, :] - contacts[None, :, :], axis=2)
     order = np.argsort(-gap.min(axis=1), kind="stable")
     _, n = model.planes(to_model(h, x[order]))
@@ -231,19 +230,22 @@ def _locate(session, leading: list, *, radius: float, angle: float):
     if np.linalg.norm(away) <= 1e-12 * max(radius, 1.0):
         away = np.cross(normal, np.eye(3)[np.argmin(np.abs(normal))])
     t1 = away / np.linalg.norm(away)
-    t2 = np.cross(normal, t1)
-    angles = np.deg2rad(angle) * np.arange(3)
-    directions = np.cos(angles)[:, None] * t1 + np.sin(angles)[:, None] * t2
-    return p, normal, directions, MissedLine(starts[k], -normal, 2.0 * standoff)
+    return p, normal, _fan(t1, np.cross(normal, t1), angle), MissedLine(starts[k], -normal, 2.0 * standoff)
+
+
+def _fan(t1: np.ndarray, t2: np.ndarray, angle: float, start: float = 0.0) -> np.ndarray:
+    """Three curve directions ``(3, 3)`` in the plane of the unit vectors ``t1``, ``t2``: at ``start``
+    (radians from ``t1``) and ``angle`` and twice ``angle`` degrees on."""
+    angles = start + np.deg2rad(angle) * np.arange(3)
+    return np.cos(angles)[:, None] * t1 + np.sin(angles)[:, None] * t2
 
 
 def _best_line(session, leading: list, weights: np.ndarray, *, radius: float, angle: float, candidates: int, rng):
     """The approach line of largest expected gain among ``leading`` hypotheses (probabilities
     ``weights``): ``(gain, contact, normal, directions, line)``, or None where no line qualifies."""
-    result = session.result
     models = {e.name: e.model for e in session.recognizer.models}
     weights = weights / weights.sum()
-    use = [i for i in range(len(session.features)) if i not in result.slipped]
+    use = session.kept()
     x_world = np.concatenate([session.features[i].points for i in use])
     # each leading model at each of its poses; the poses share the model's probability as truths and
     # are the starts of its refits
@@ -257,8 +259,7 @@ def _best_line(session, leading: list, weights: np.ndarray, *, radius: float, an
             info.append(information(models[h.model], pose, h.scale, x_world))
     p, owner = np.array(p), np.array(owner)
     by_model = np.eye(len(leading))[owner]                                       # (poses, models)
-    contacts = np.array([w.contact if w.contact is not None else f.geometry.contact
-                         for w, f in zip(session.world, session.features)])
+    contacts = session.contacts()
     sizes = [len(c) for f in session.features for c in f.curves]
     points = int(np.median(sizes))
     spacing = float(np.median([w.spacing for w in session.world]))
@@ -279,8 +280,7 @@ def _best_line(session, leading: list, weights: np.ndarray, *, radius: float, an
             start = rng.uniform(0.0, 2 * np.pi)
             t1 = frame.d1 @ h.rotation
             t2 = frame.d2 @ h.rotation
-            angles = start + np.deg2rad(angle) * np.arange(3)
-            directions = np.cos(angles)[:, None] * t1 + np.sin(angles)[:, None] * t2
+            directions = _fan(t1, t2, angle, start)
             outcomes = [outcome(models[g.model], g, line, directions, step=spacing, points=points, spacing=spacing)
                         for g in poses]
             kinds = np.array([o[0] for o in outcomes], dtype=object)

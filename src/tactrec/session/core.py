@@ -160,6 +160,11 @@ class Session:
         """Each touch's data in the world frame, in order."""
         return [r.world for r in self.records]
 
+    def contacts(self) -> np.ndarray:
+        """Each touch's contact in the world frame ``(N, 3)``: the one its data give, else its estimate's."""
+        return np.array([r.world.contact if r.world.contact is not None else r.features.geometry.contact
+                         for r in self.records])
+
     @_atomic
     def add(self, data: TactileData, sensor2world=None) -> SessionResult:
         """Add a touch (sensor frame; ``sensor2world`` a ``(rotation, translation)`` pair or None for
