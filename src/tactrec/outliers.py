@@ -46,13 +46,21 @@ errors are the plain ones, on the points kept (a hard-rejecting loss).
 
 The ends.  Where a touch had outliers, so that its sensor slips, the
 :data:`ENDS` points at each end of a curve that the spike residual could
-not judge are judged against the registration instead: under the best
-model's pose (the search on the points kept), an end point whose distance
-to the model exceeds ``k`` times the touch's noise sigma (third
-differences of the points kept) -- the same ``k``: Gaussian noise passes
-it with probability below :data:`ALPHA` -- and :data:`FLOOR` steps is set
-aside too, and the search runs again on the points left
-(:func:`ends_off`, :meth:`tactrec.recognition.Recognizer.recognize`).  A
+not judge are judged against the registration instead: under the pose that
+a search of the best model (of the search on the points kept) finds on the
+judged points alone (each curve without its ends), so that no end point
+tilts the pose it is judged by.  (The first search's pose will not do: a
+search of every point may fit an end point off its trace and tilt its
+neighbours off instead, at a box's corner for one.  Nor will the smaller
+distance under the two poses, for the same reason.)  An end point is off
+when its distance to the model under that pose exceeds ``k`` times the
+touch's noise sigma (third differences of the points kept) -- the same
+``k``: Gaussian noise passes it with probability below :data:`ALPHA` --
+and :data:`FLOOR` steps; it is set aside too, and the search runs again on
+the points left.  Where the judged points leave that pose free along a
+direction that only the ends hold (the judged points on a box's two faces,
+an end on the third), good end points may be set aside with the bad: they
+cost the fit points, not its answer (:func:`ends_off`, :meth:`tactrec.recognition.Recognizer.recognize`).  A
 touch without outliers is never judged this way, so that a model the
 search got wrong, which leaves a clean curve's ends off, sets nothing
 aside.
@@ -75,7 +83,7 @@ import numpy as np
 from .errors import InputError
 from .io.touch import MIN_POINTS, TactileData
 
-__all__ = ["ALPHA", "FLOOR", "ENDS", "spike_residuals", "bound", "flagged", "kept", "ends_off", "without", "judge_ends"]
+__all__ = ["ALPHA", "FLOOR", "ENDS", "spike_residuals", "bound", "flagged", "kept", "ends", "ends_off", "without", "judge_ends"]
 
 #: the chance that Gaussian noise sets any point of a touch aside
 ALPHA = 1e-6
@@ -171,33 +179,41 @@ def without(data: TactileData, marks: list[np.ndarray], count: int) -> TactileDa
     return dataclasses.replace(data, curves=tuple(curves))
 
 
-def ends_off(curves, residuals: np.ndarray, noise: float, step: float) -> list[np.ndarray]:
-    """Per curve of ``curves`` (``(n_i, 3)`` each), which of its :data:`ENDS` points at either end lie off
-    the registered model (module text): ``residuals (sum n_i,)`` their signed distances under the best
-    pose, ``noise`` the touch's sigma and ``step`` its median step between points."""
-    sizes = [len(c) for c in curves]
-    k = np.sqrt(2.0 * np.log(max(sum(sizes), 1) / ALPHA))
-    limit = max(k * noise, FLOOR * step)
-    marks, start = [], 0
+def ends(sizes) -> list[np.ndarray]:
+    """Per curve of ``sizes`` points, which are among the :data:`ENDS` at either end ``(n_i,)`` bool."""
+    marks = []
     for n in sizes:
         end = np.zeros(n, dtype=bool)
         end[:ENDS], end[max(n - ENDS, 0):] = True, True
-        marks.append(end & (np.abs(residuals[start:start + n]) > limit))
-        start += n
+        marks.append(end)
     return marks
 
 
-def judge_ends(touch, outcome, best, residuals, estimation: dict, search):
+def ends_off(curves, residuals: np.ndarray, noise: float, step: float) -> list[np.ndarray]:
+    """Per curve of ``curves`` (``(n_i, 3)`` each), which of its :data:`ENDS` points at either end lie off
+    the registered model (module text): ``residuals (sum n_i,)`` their signed distances under the pose
+    of the judged points, ``noise`` the touch's sigma and ``step`` its median step between points."""
+    sizes = [len(c) for c in curves]
+    k = np.sqrt(2.0 * np.log(max(sum(sizes), 1) / ALPHA))
+    limit = max(k * noise, FLOOR * step)
+    bounds = np.cumsum([0] + sizes)
+    return [end & (np.abs(residuals[a:b]) > limit) for end, a, b in zip(ends(sizes), bounds[:-1], bounds[1:])]
+
+
+def judge_ends(touch, outcome, best, refitted, estimation: dict, search):
     """The touch (a :class:`~tactrec.features.Touch` with outliers) and its search's ``outcome`` again
-    without the curves' end points off the ``best`` registration (:func:`ends_off`; ``residuals(best,
-    touch)`` their signed distances), ``search(touch)`` the search on the points left (its work added
-    to the first's); as they were where none is off or nothing was registered.  ``estimation``: the
-    keywords of :meth:`~tactrec.features.Touch.from_data`."""
+    without the curves' end points off the ``best`` registration (:func:`ends_off`: ``refitted(best,
+    touch, judged)`` the signed distances of the touch's points under the pose a search of ``best``'s
+    model on the points ``judged (m,)`` bool alone finds),
+    ``search(touch)`` the search on the points left (its work added to the first's); as they were where
+    none is off or nothing was registered.  ``estimation``: the keywords of
+    :meth:`~tactrec.features.Touch.from_data`."""
     from .features import Touch
 
     if best is None:
         return touch, outcome
-    marks = ends_off(touch.curves, residuals(best, touch), touch.noise, touch.data.spacing)
+    judged = ~np.concatenate(ends([len(c) for c in touch.curves]))
+    marks = ends_off(touch.curves, refitted(best, touch, judged), touch.noise, touch.data.spacing)
     off = int(sum(int(m.sum()) for m in marks))
     if off == 0:
         return touch, outcome
