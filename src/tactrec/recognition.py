@@ -25,6 +25,7 @@ import numpy as np
 from .errors import InputError
 from .estimation import LocalGeometry
 from .features import Touch
+from .io.meeting import meeting
 from .io.touch import TactileData
 from .methods import DEFAULT_METHOD, get_method
 from .outliers import judge_ends, without
@@ -137,6 +138,12 @@ class Recognition:
         """How many of the touch's points were set aside (:mod:`tactrec.outliers`; 0 without a touch)."""
         return int(self.touch.outliers) if self.touch is not None else 0
 
+    @functools.cached_property
+    def meeting(self) -> float:
+        """How far the curves pass from their meeting point: the largest distance of a curve (of the
+        points kept) from it, data units (0 without a touch; :func:`tactrec.io.meeting.meeting`)."""
+        return float(meeting(self.touch.data)[1].max()) if self.touch is not None else 0.0
+
     @property
     def registration(self) -> Registration | None:
         return self.ranking[0] if self.ranking and self.ranking[0].ok else None
@@ -157,6 +164,7 @@ class Recognition:
             "located": self.located,
             "settled": self.settled,
             "outliers": self.outliers,
+            "meeting": self.meeting,
             "seconds": round(self.seconds, 4),
         }
 

@@ -11,7 +11,7 @@ import numpy as np
 
 from ..errors import InputError
 
-__all__ = ["closest_on_polyline", "find_contact", "check_meeting"]
+__all__ = ["closest_on_polyline", "find_contact", "meeting", "check_meeting", "MEETING"]
 
 
 def closest_on_polyline(points: np.ndarray, line: np.ndarray) -> np.ndarray:
@@ -52,19 +52,33 @@ def find_contact(curves) -> np.ndarray:
     return x
 
 
+#: curves must pass this many median point spacings from their meeting point (:func:`check_meeting`)
+MEETING = 2.5
+
+
+def meeting(data) -> tuple[np.ndarray, np.ndarray]:
+    """Where the curves of ``data`` meet and how far each passes from it: the point ``(3,)`` (the given
+    ``contact``, else the least-squares point of :func:`find_contact`) and each curve's distance from
+    it ``(k,)`` (data units)."""
+    contact = np.asarray(data.contact, dtype=np.float64) if data.contact is not None else find_contact(data.curves)
+    gaps = np.array([float(np.linalg.norm(closest_on_polyline(contact[None], np.asarray(c, dtype=np.float64))[0]
+                                          - contact)) for c in data.curves])
+    return contact, gaps
+
+
 def check_meeting(data) -> np.ndarray:
     """Check that the curves pass through one point; return that point.
 
-    Each curve must come within 2.5 point spacings of the contact (given, or
-    found by :func:`find_contact`), and the curves' tangents there must span a
-    plane.  Raises :class:`InputError` naming ``data.source``.
+    Curves that pass near each other rather than through one point are handled (the point is their
+    least-squares meeting point, :func:`meeting`), but each curve must come within :data:`MEETING`
+    median point spacings of it, and the curves' tangents there must span a plane.  Raises
+    :class:`InputError` naming ``data.source``.
     """
-    contact = data.contact if data.contact is not None else find_contact(data.curves)
-    tol = 2.5 * data.spacing
-    for i, c in enumerate(data.curves):
-        d = float(np.linalg.norm(closest_on_polyline(contact[None], c)[0] - contact))
+    contact, gaps = meeting(data)
+    tol = MEETING * data.spacing
+    for i, d in enumerate(gaps):
         if d > tol:
             where = "the given contact" if data.contact is not None else "a common point"
             raise InputError(f"the curves do not meet: curve {i + 1} passes {d:.4g} from {where} "
-                             f"(more than 2.5 point spacings, {tol:.4g})", data.source)
+                             f"(more than {MEETING} point spacings, {tol:.4g})", data.source)
     return contact
