@@ -155,3 +155,30 @@ def test_a_slipping_sensors_curve_ends_are_judged_by_the_fit(small):
             kept = recognizer.recognize(only_end)
             assert kept.outliers == 0 and len(kept.touch.points) == len(data.points)
     assert exact >= 17 and right >= 19, (exact, right)
+
+
+def test_a_session_counts_each_touchs_outliers(small):
+    """Eight sessions of three touches of one small mesh (random sensor frames, the object in a random
+    world pose), the second touch with 5% outliers: the session's result and its JSON give each
+    touch's count (0 for the clean ones, the screen's count for the second), and the touched model
+    is best in 7 or more with no touch slipped."""
+    from tactrec.bench.common import instance_rng
+    from tactrec.simulation import random_rigid_motion, sensor_to_world
+
+    right = 0
+    with Recognizer(small) as recognizer:
+        for k in range(8):
+            entry = small[k % len(small)]
+            pose = random_rigid_motion(instance_rng(30, k), extent=300.0)
+            session = recognizer.session()
+            screened = []
+            for i in range(3):
+                data = _touch(entry.model, 31, k, i, noise=0.02, outliers=0.05 if i == 1 else 0.0)
+                screened.append(Touch.from_data(data).outliers)
+                result = session.add(data, sensor_to_world(data, pose))
+            assert screened[0] == screened[2] == 0 and screened[1] > 0
+            assert list(result.outliers) == [f.outliers for f in session.features]
+            assert result.outliers[1] >= screened[1] and result.outliers[0] == result.outliers[2] == 0
+            assert json.loads(json.dumps(result.to_json()))["outliers"] == list(result.outliers)
+            right += result.best == entry.name and result.slipped == ()
+    assert right >= 7

@@ -75,7 +75,8 @@ class SessionResult:
     ``estimate`` the latest touch's contact, normal and curvatures in the world frame; ``stages``
     the add's ``seconds`` by part (:data:`tactrec.session.STAGES`: the touch's own search, the
     joint fits, the search with the other touches in the score); ``missed`` the lines that met
-    nothing (:meth:`tactrec.session.Session.add_miss`).
+    nothing (:meth:`tactrec.session.Session.add_miss`); ``outliers`` how many points each touch set
+    aside as off its curve's trace (:mod:`tactrec.outliers`).
     """
 
     ranking: list
@@ -88,6 +89,7 @@ class SessionResult:
     stages: dict = dataclasses.field(default_factory=dict)
     unknown_prior: float = UNKNOWN_PRIOR
     missed: int = 0
+    outliers: tuple = ()
 
     @property
     def best(self) -> str | None:
@@ -147,5 +149,6 @@ class SessionResult:
         if g is not None:                                            # the latest touch, world frame
             out.update(contact=g.contact.tolist(), normal=g.normal.tolist(), curvatures=[g.k1, g.k2])
         out.update(confidence=self.confidence, unknown=self.unknown, ambiguous=self.ambiguous, touches=self.touches,
-                   slipped=list(self.slipped), missed=self.missed, seconds=round(self.seconds, 4))
+                   slipped=list(self.slipped), missed=self.missed,
+                   outliers=[int(n) for n in self.outliers], seconds=round(self.seconds, 4))
         return out
