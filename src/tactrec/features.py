@@ -114,7 +114,8 @@ class Touch:
             if surface is not None:
                 sides.append((sign, surface, surface_curves(data.curves, geometry, tip, sign)))
         if not sides:
-            bend = 1.0 / (-geometry.k2 if geometry.oriented else max(-geometry.k2, geometry.k1))
+            kn = geometry.normal_curvatures
+            bend = 1.0 / (-np.min(kn) if geometry.oriented else max(-np.min(kn), np.max(kn)))
             raise InputError(f"tip_radius {tip:g}: the curves bend more tightly (radius {bend:.3g}) than a tip of "
                              f"that radius can trace any surface (a sharp edge's bend: {1 / (1 + EDGE):g} x the radius "
                              "or more)", data.source)

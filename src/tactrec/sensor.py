@@ -23,8 +23,11 @@ own scale and all of them seeded with the touch's ``rng``:
     keeping its length about the contact;
 ``tip_radius``
     the points are the centres of a spherical tip of that radius: each
-    surface point moved outward along the surface's normal there (so every
-    point lies at the radius from the surface);
+    stroke is the section of the surface offset by the radius with the
+    stroke's plane, sampled at the surface points' own steps along it
+    (:func:`tip_centres`: every point lies at the radius from the surface;
+    in a hollow tighter than the tip it touches the surface elsewhere, and
+    over a convex edge the centre sweeps an arc about it);
 ``jitter``
     Gaussian noise of that sigma on every coordinate, on top of the
     simulation's own ``noise``;
@@ -43,8 +46,9 @@ import dataclasses
 import numpy as np
 
 from .io.touch import MIN_POINTS
+from .tip import Offset
 
-__all__ = ["Imperfections", "record"]
+__all__ = ["Imperfections", "record", "tip_centres"]
 
 #: a curve is sampled this many times more finely than the touch's spacing before it is resampled
 FINE = 4
@@ -160,8 +164,10 @@ def record(model, frame, tangents: np.ndarray, *, spacing: float, points: int, i
         else:
             curve = curve[::fine]
         if imp.tip_radius > 0:
-            _, normals = model.planes(curve)
-            curve = curve + imp.tip_radius * np.asarray(normals)
+            across = np.cross(tangent, model.site_frame(site).normal)          # the stroke's plane
+            curve = tip_centres(model, curve, imp.tip_radius, across=across, anchor=frame.point)
+            if len(curve) < MIN_POINTS:
+                raise ValueError(f"a {imp.tip_radius:g} tip's path left a curve {len(curve)} points")
         curves.append(curve)
     if imp.jitter > 0:
         curves = [c + rng.normal(0.0, imp.jitter, size=c.shape) for c in curves]
@@ -179,3 +185,61 @@ def record(model, frame, tangents: np.ndarray, *, spacing: float, points: int, i
             curves[i][j - bounds[i]] += r * d
             moved.append([i, int(j - bounds[i])])
     return curves, {"outlier_points": moved}
+
+
+def _pushed_out(model, centres: np.ndarray, radius: float, across: np.ndarray, iterations: int) -> np.ndarray:
+    """``centres (n, 3)`` moved within the plane of normal ``across (3,)`` (unit), each along its closest
+    point's normal as that plane holds it, until each is at ``radius`` from the surface (within 1e-9
+    of it, or after ``iterations`` moves)."""
+    offset = Offset(model, radius)                   # exact distances (a closed form's to its foot points)
+    for _ in range(iterations):
+        d, n = offset.planes(centres)
+        short = -np.asarray(d, dtype=np.float64)
+        if not np.any(np.abs(short) > 1e-9 * max(radius, 1.0)):
+            break
+        u = np.asarray(n, dtype=np.float64)
+        u = u - (u @ across)[:, None] * across[None]
+        held = np.sum(u * u, axis=1)                     # how much of the distance a move along u changes
+        centres = centres + np.where(held > 1e-6, short / np.maximum(held, 1e-6), 0.0)[:, None] * u
+    return centres
+
+
+def _arc_length(x: np.ndarray) -> np.ndarray:
+    return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(x, axis=0), axis=1))])
+
+
+def tip_centres(model, points: np.ndarray, radius: float, *, across: np.ndarray | None = None,
+                anchor: np.ndarray | None = None, iterations: int = 200) -> np.ndarray:
+    """The centres ``(n, 3)`` of a spherical tip of ``radius`` traced along the surface points ``points
+    (n, 3)`` of a stroke, as a sensor records them: the section of the surface offset by ``radius``
+    with the stroke's plane (of unit normal ``across``; default: the plane through the points' mean
+    spanned by their main direction and the surface's normal at the middle point), sampled at the
+    points' own steps along it.
+
+    Each point is pushed out within that plane until it lies at ``radius`` from the surface; the
+    path is filled in (each step cut into pieces of an eighth of the shortest step, each pushed out
+    alike: over a convex edge the arc the centre sweeps about it, in a hollow tighter than the tip
+    the place where it touches both sides) and sampled again at the surface points' own steps along
+    it, from the point nearest ``anchor`` (default: the middle point).  A tip there touches the
+    surface at its closest point and enters it nowhere."""
+    x = np.asarray(points, dtype=np.float64)
+    if across is None:
+        along = np.linalg.svd(x - x.mean(axis=0))[2][0]
+        across = np.cross(along, np.asarray(model.planes(x[len(x) // 2][None])[1], dtype=np.float64)[0])
+    across = np.asarray(across, dtype=np.float64) / np.linalg.norm(across)
+    centres = _pushed_out(model, x, radius, across, iterations)
+    steps = np.linalg.norm(np.diff(x, axis=0), axis=1)
+    piece = max(float(steps.min()), 1e-12) / 8.0
+    cuts = np.maximum(np.ceil(np.linalg.norm(np.diff(centres, axis=0), axis=1) / piece).astype(int), 1)
+    filled = [centres[:1]]
+    for i, k in enumerate(cuts):
+        w = (np.arange(1, k + 1) / k)[:, None]
+        filled.append(centres[i] + w * (centres[i + 1] - centres[i]))
+    start = np.concatenate([[0], np.cumsum(cuts)])                    # where each centre lies in the fill
+    dense = _pushed_out(model, np.concatenate(filled), radius, across, iterations)
+    s = _arc_length(dense)
+    k = len(x) // 2 if anchor is None else int(np.argmin(np.linalg.norm(x - anchor, axis=1)))
+    want = s[start[k]] + (_arc_length(x) - _arc_length(x)[k])
+    inside = (want >= s[0]) & (want <= s[-1])
+    out = np.stack([np.interp(want[inside], s, dense[:, j]) for j in range(3)], axis=1)
+    return _pushed_out(model, out, radius, across, iterations)

@@ -47,8 +47,14 @@ a sharp convex edge: the centres circle it at the radius ``r``, and the
 estimate scatters about that value.  So a bend up to :data:`EDGE` tighter
 (``1 + r kappa > -EDGE``, a bend radius above ``r / (1 + EDGE)``)
 is read as such an edge, its ``1 + r kappa`` taken as :data:`SHARP` (a
-surface radius of ``SHARP r``); a tighter bend is not a guess: that side is
-not tried, and a touch with no side left is an
+surface radius of ``SHARP r``).  A tighter bend is not a guess where the
+curves themselves show it: where a curve's own normal curvature at the
+contact (what the data measure directly) is beyond ``-EDGE``, that side is
+not tried.  A principal curvature beyond it, where no curve's is, is the
+estimate's extrapolation (Euler's formula fitted to the curves' normal
+curvatures overshoots at a kink of the centres' path, where a tip leaves
+one face for another) and is read as an edge's like the rest.  A touch with
+no side left is an
 :class:`~tactrec.errors.InputError` naming its file
 (:meth:`tactrec.features.Touch.with_estimate`).
 
@@ -84,8 +90,9 @@ def corrected(geometry: LocalGeometry, r: float) -> LocalGeometry | None:
     to try: the outward one): contact moved by ``-r N``, ``kappa -> kappa / (1 + r kappa)`` for the
     principal curvatures (and, by Euler's theorem, the normal curvatures along the tangents);
     directions, tangents and normal kept.  ``1 + r kappa`` below :data:`SHARP` but above ``-EDGE`` is
-    a sharp edge's (taken as :data:`SHARP`); None at or below ``-EDGE`` (module text)."""
-    if 1.0 + r * geometry.k2 <= -EDGE:                     # k2 <= k1: the tighter bend of the two
+    a sharp edge's (taken as :data:`SHARP`); None where a curve's own normal curvature is at or below
+    ``-EDGE`` (module text)."""
+    if 1.0 + r * float(np.min(geometry.normal_curvatures)) <= -EDGE:       # the tightest bend measured
         return None
     k1 = geometry.k1 / max(1.0 + r * geometry.k1, SHARP)
     k2 = geometry.k2 / max(1.0 + r * geometry.k2, SHARP)
