@@ -46,24 +46,23 @@ errors are the plain ones, on the points kept (a hard-rejecting loss).
 
 The ends.  Where a touch had outliers, so that its sensor slips, the
 :data:`ENDS` points at each end of a curve that the spike residual could
-not judge are judged against the registration instead: under the pose that
-a search of the best model (of the search on the points kept) finds on the
-judged points alone (each curve without its ends), so that no end point
-tilts the pose it is judged by.  (The first search's pose will not do: a
-search of every point may fit an end point off its trace and tilt its
-neighbours off instead, at a box's corner for one.  Nor will the smaller
-distance under the two poses, for the same reason.)  An end point is off
-when its distance to the model under that pose exceeds ``k`` times the
-touch's noise sigma (third differences of the points kept) -- the same
-``k``: Gaussian noise passes it with probability below :data:`ALPHA` --
-and :data:`FLOOR` steps; it is set aside too, and the search runs again on
-the points left.  Where the judged points leave that pose free along a
-direction that only the ends hold (the judged points on a box's two faces,
-an end on the third), good end points may be set aside with the bad: they
-cost the fit points, not its answer (:func:`ends_off`, :meth:`tactrec.recognition.Recognizer.recognize`).  A
-touch without outliers is never judged this way, so that a model the
-search got wrong, which leaves a clean curve's ends off, sets nothing
-aside.
+not judge are judged against the registration instead: under the best pose
+that a search of the judged points alone (each curve without its ends)
+finds, so that no end point tilts the pose it is judged by.  (A search of
+every point will not do: it may fit an end point off its trace and tilt
+its neighbours off instead, at a box's corner for one; nor will a local
+refinement of its pose on the judged points, which on a mesh stalls where
+the tilted pose lies.)  An end point is off when its distance to the model
+under that pose exceeds ``k`` times the touch's noise sigma (third
+differences of the points kept) -- the same ``k``: Gaussian noise passes
+it with probability below :data:`ALPHA` -- and :data:`FLOOR` steps; it is
+set aside too, and the points left are searched (:func:`judge_ends`).
+Where the judged points leave that pose free along a direction that only
+the ends hold (the judged points on a box's two faces, an end on the
+third), good end points may be set aside with the bad: they cost the fit
+points, not its answer.  A touch without outliers is never judged this
+way, so that a model the search got wrong, which leaves a clean curve's
+ends off, sets nothing aside.
 
 A touch with nothing set aside is used exactly as given.  A touch whose
 outliers leave a curve fewer than :data:`~tactrec.io.touch.MIN_POINTS`
@@ -200,24 +199,34 @@ def ends_off(curves, residuals: np.ndarray, noise: float, step: float) -> list[n
     return [end & (np.abs(residuals[a:b]) > limit) for end, a, b in zip(ends(sizes), bounds[:-1], bounds[1:])]
 
 
-def judge_ends(touch, outcome, best, refitted, estimation: dict, search):
-    """The touch (a :class:`~tactrec.features.Touch` with outliers) and its search's ``outcome`` again
-    without the curves' end points off the ``best`` registration (:func:`ends_off`: ``refitted(best,
-    touch, judged)`` the signed distances of the touch's points under the pose a search of ``best``'s
-    model on the points ``judged (m,)`` bool alone finds),
-    ``search(touch)`` the search on the points left (its work added to the first's); as they were where
-    none is off or nothing was registered.  ``estimation``: the keywords of
-    :meth:`~tactrec.features.Touch.from_data`."""
+def judge_ends(touch, search, residuals, estimation: dict):
+    """The touch (a :class:`~tactrec.features.Touch` with outliers) without the curves' end points off
+    the registration (module text), and the search's outcome on it: ``search(touch)`` the method's
+    search, ``residuals(registration, touch)`` the signed distances of the touch's points under a
+    registration's pose, ``estimation`` the keywords of :meth:`~tactrec.features.Touch.from_data`.
+
+    The judged points alone (each curve without its ends) are searched first; the ends are judged
+    under that search's best pose (:func:`ends_off`); the points left are searched again, that
+    search's work added to the first's.  Where the judged points are too few to be a touch, or their
+    search registers nothing, the touch is searched as it is."""
     from .features import Touch
 
+    sizes = [len(c) for c in touch.data.curves]
+    inner_marks = ends(sizes)
+    try:
+        inner = Touch.from_data(without(touch.data, inner_marks, int(sum(int(m.sum()) for m in inner_marks))),
+                                **estimation)
+    except InputError:
+        return touch, search(touch)
+    first = search(inner)
+    best = min((r for r in first.ranking if r.ok), key=lambda r: (r.error, r.model), default=None)
     if best is None:
-        return touch, outcome
-    judged = ~np.concatenate(ends([len(c) for c in touch.curves]))
-    marks = ends_off(touch.curves, refitted(best, touch, judged), touch.noise, touch.data.spacing)
+        found = search(touch)
+        return touch, dataclasses.replace(found, work=found.work + first.work)
+    marks = ends_off(touch.curves, residuals(best, touch), touch.noise, touch.data.spacing)
     off = int(sum(int(m.sum()) for m in marks))
-    if off == 0:
-        return touch, outcome
-    again = Touch.from_data(without(touch.data, marks, touch.outliers + off), **estimation)
-    again = dataclasses.replace(again, outliers=touch.outliers + off + again.outliers)
-    found = search(again)
-    return again, dataclasses.replace(found, work=found.work + outcome.work)
+    if off:
+        again = Touch.from_data(without(touch.data, marks, touch.outliers + off), **estimation)
+        touch = dataclasses.replace(again, outliers=touch.outliers + off + again.outliers)
+    found = search(touch)
+    return touch, dataclasses.replace(found, work=found.work + first.work)

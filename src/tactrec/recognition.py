@@ -28,7 +28,7 @@ from .features import Touch
 from .io.meeting import meeting
 from .io.touch import TactileData
 from .methods import DEFAULT_METHOD, get_method
-from .outliers import judge_ends, without
+from .outliers import judge_ends
 from .probability import AMBIGUOUS, UNKNOWN_PRIOR, Evidence, evidence, fit_limit, residuals
 from .registration.result import Registration
 from .tables import CurvatureTable
@@ -368,12 +368,13 @@ class Recognizer:
             if unknown:
                 raise InputError(f"no model named {unknown[0]!r} among the recognizer's", "among")
             chosen = [i for i, entry in enumerate(self.models) if entry.name in set(among)]
-        outcome = self.method.search(touch, self.models, self.config, self.runner, among=chosen, budget=budget)
+
+        def search(t):
+            return self.method.search(t, self.models, self.config, self.runner, among=chosen, budget=budget)
         if touch.outliers and not len(context):         # a slipping sensor: its curves' ends judged by the fit
-            def again(t):
-                return self.method.search(t, self.models, self.config, self.runner, among=chosen, budget=budget)
-            best = min((r for r in outcome.ranking if r.ok), key=_rank_key, default=None)
-            touch, outcome = judge_ends(touch, outcome, best, self._refitted, self.estimation, again)
+            touch, outcome = judge_ends(touch, search, self._residuals, self.estimation)
+        else:
+            outcome = search(touch)
         ranking = sorted(outcome.ranking, key=_rank_key)
         best = ranking[0].model if ranking and ranking[0].ok else None
         ok = [r for r in ranking if r.ok]
@@ -397,23 +398,6 @@ class Recognizer:
         offset by each point's tip: :mod:`tactrec.tip`)."""
         model = touch.in_units(r.scale).exact(self._by_name[r.model].model)
         return residuals(model, r.rotation, r.translation, touch.joint_points, r.scale)
-
-    def _refitted(self, r: Registration, touch: Touch, judged: np.ndarray) -> np.ndarray:
-        """The data's signed distances (data units) to the model of ``r`` under the pose that a search of
-        that model on the points ``judged (m,)`` bool alone finds (:func:`tactrec.outliers.judge_ends`);
-        under ``r``'s own pose where the judged points are too few to be a touch or find no pose."""
-        marks, start = [], 0
-        for c in touch.data.curves:
-            marks.append(~judged[start:start + len(c)])
-            start += len(c)
-        try:
-            inner = Touch.from_data(without(touch.data, marks, int((~judged).sum())), **self.estimation)
-        except InputError:
-            return self._residuals(r, touch)
-        index = [i for i, entry in enumerate(self.models) if entry.name == r.model]
-        found = self.method.search(inner, self.models, self.config, self.runner, among=index)
-        fits = [f for f in found.ranking if f.ok and f.model == r.model]
-        return self._residuals(fits[0] if fits else r, touch)
 
 
 def recognize(data: TactileData, models: Iterable[ModelEntry], *, method: str = DEFAULT_METHOD, workers: int = 1,
