@@ -68,7 +68,8 @@ class TactileData:
         if not isinstance(curves, (list, tuple)) and not (isinstance(curves, np.ndarray) and curves.ndim == 3):
             raise InputError("'curves' must be a list of curves", source)
         if len(curves) < MIN_CURVES:
-            raise InputError(f"needs at least {MIN_CURVES} curves, got {len(curves)}", source)
+            raise InputError(f"needs at least {MIN_CURVES} curves, got {len(curves)} (the normal curvatures of fewer "
+                             "directions leave the principal curvatures undetermined)", source)
         arrays = [_points(c, f"curve {i + 1}", source) for i, c in enumerate(curves)]
         for i, arr in enumerate(arrays):
             if len(arr) < MIN_POINTS:
