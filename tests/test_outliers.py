@@ -177,7 +177,6 @@ def test_a_session_counts_each_touchs_outliers(small):
                 screened.append(Touch.from_data(data).outliers)
                 result = session.add(data, sensor_to_world(data, pose))
             assert screened[0] == screened[2] == 0 and screened[1] > 0
-            assert list(result.outliers) == [f.outliers for f in session.features]
             assert result.outliers[1] >= screened[1] and result.outliers[0] == result.outliers[2] == 0
             assert json.loads(json.dumps(result.to_json()))["outliers"] == list(result.outliers)
             right += result.best == entry.name and result.slipped == ()

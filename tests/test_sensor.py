@@ -69,8 +69,8 @@ def test_a_round_tip_records_its_centres_at_the_radius(sphere, mug):
 
 
 def test_a_tip_sweeps_round_convex_edges_and_stays_out_of_tight_hollows():
-    """A 3 mm tip on a box (convex edges) and on a torus of tube radius 2.5 mm (its inner side a hollow
-    tighter than the tip), 20 touches each: every centre lies 3 mm from the mesh by libigl's closest
+    """A 3 mm tip on a box (convex edges) and on a torus of radii 4 and 2.5 mm (its hole a hollow of radius
+    1.5, tighter than the tip), 20 touches each: every centre lies 3 mm from the mesh by libigl's closest
     points (within 1e-6), so the tip enters the surface nowhere; the steps between centres are
     the surface points' along the path (no chord longer by 0.1%, the median within 1%: a chord across a
     hollow's kink is shorter), and over the box's edges the centres turn in arcs of radius 3:
@@ -81,13 +81,16 @@ def test_a_tip_sweeps_round_convex_edges_and_stays_out_of_tight_hollows():
     from tactrec.surfaces.mesh import MeshModel
 
     box = trimesh.creation.box(extents=(30.0, 20.0, 12.0)).subdivide().subdivide().subdivide()
-    torus = trimesh.creation.torus(major_radius=12.0, minor_radius=2.5, major_sections=96, minor_sections=48)
+    torus = trimesh.creation.torus(major_radius=4.0, minor_radius=2.5, major_sections=96, minor_sections=48)
     tip = Imperfections(tip_radius=3.0)
+    hole = []
     for name, mesh in (("box", box), ("torus", torus)):
         model = MeshModel(mesh.vertices, mesh.faces, name=name, units="mm")
         for k in range(20):
             data = simulate_random_touch(model, rng=np.random.default_rng([40, k]), imperfections=tip,
                                          points=31, spacing=0.3, angle=60.0, sensor_frame=False)
+            if name == "torus":
+                hole.append(np.min(np.linalg.norm(np.concatenate(data.curves)[:, :2], axis=1)))
             points = np.concatenate(data.curves)
             d2, _, _ = igl.point_mesh_squared_distance(points, np.asarray(mesh.vertices, dtype=np.float64),
                                                       np.asarray(mesh.faces, dtype=np.int64))
@@ -101,6 +104,7 @@ def test_a_tip_sweeps_round_convex_edges_and_stays_out_of_tight_hollows():
                     cos = np.sum(d[1:] * d[:-1], axis=1) / (steps[1:] * steps[:-1])
                     turn = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
                     assert np.all(turn <= np.degrees(0.3 / 3.0) + 1.0), (k, turn.max())
+    assert min(hole) < 4.0                              # some strokes reach into the torus's hole
 
 
 def test_uneven_steps_keep_the_curves_length_and_mean_spacing(sphere):

@@ -64,7 +64,8 @@ def test_a_sphere_touched_with_a_tip_gives_its_own_curvature(r):
 
 def test_the_correction_is_the_offset_formula():
     """kappa / (1 + r kappa) per principal curvature, the contact moved by -r N; a bend at the tip's radius
-    (a sharp edge, 1 + r kappa = 0) or up to EDGE tighter is a sharp edge's; beyond it, None."""
+    (a sharp edge, 1 + r kappa = 0) or up to EDGE tighter is a sharp edge's (radius SHARP r); beyond
+    it, in a curve's own normal curvature, None."""
     from tactrec.tip import EDGE, SHARP
 
     from tactrec.estimation import LocalGeometry
@@ -74,7 +75,8 @@ def test_the_correction_is_the_offset_formula():
     c = corrected(g, 2.0)
     assert np.isclose(c.k1, 0.1 / 1.2) and np.isclose(c.k2, -0.2 / 0.6)
     assert np.allclose(c.contact, [0.0, 0.0, -2.0]) and np.allclose(c.normal_curvatures, [c.k1, c.k2])
-    assert np.isclose(corrected(g, 5.0).k2, -0.2 / SHARP) and np.isclose(corrected(g, 5.5).k2, -0.2 / SHARP)
+    for r in (5.0, 5.5):                           # an edge: the surface's radius there SHARP r
+        assert np.isclose(corrected(g, r).k2, -1.0 / (SHARP * r))
     assert corrected(g, (1.0 + EDGE) / 0.2) is None and corrected(g, 7.0) is None
 
 

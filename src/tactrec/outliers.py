@@ -82,7 +82,8 @@ import numpy as np
 from .errors import InputError
 from .io.touch import MIN_POINTS, TactileData
 
-__all__ = ["ALPHA", "FLOOR", "ENDS", "spike_residuals", "bound", "flagged", "kept", "ends", "ends_off", "without", "judge_ends"]
+__all__ = ["ALPHA", "FLOOR", "ENDS", "spike_residuals", "bound", "flagged", "kept", "ends", "ends_off", "without",
+           "judge_ends"]
 
 #: the chance that Gaussian noise sets any point of a touch aside
 ALPHA = 1e-6
@@ -208,7 +209,9 @@ def judge_ends(touch, search, residuals, estimation: dict):
     The judged points alone (each curve without its ends) are searched first; the ends are judged
     under that search's best pose (:func:`ends_off`); the points left are searched again, that
     search's work added to the first's.  Where the judged points are too few to be a touch, or their
-    search registers nothing, the touch is searched as it is."""
+    search registers nothing, the touch is searched as it is (a curve under 12 points keeps under half
+    its points without its ends: then no end is judged).  The outcome's work and budget are both
+    searches', and it is settled when both were."""
     from .features import Touch
 
     sizes = [len(c) for c in touch.data.curves]
@@ -219,14 +222,19 @@ def judge_ends(touch, search, residuals, estimation: dict):
     except InputError:
         return touch, search(touch)
     first = search(inner)
-    best = min((r for r in first.ranking if r.ok), key=lambda r: (r.error, r.model), default=None)
+    best = min((r for r in first.ranking if r.ok), key=lambda r: (r.error / r.scale, r.model), default=None)
     if best is None:
-        found = search(touch)
-        return touch, dataclasses.replace(found, work=found.work + first.work)
+        return touch, _both(first, search(touch))
     marks = ends_off(touch.curves, residuals(best, touch), touch.noise, touch.data.spacing)
     off = int(sum(int(m.sum()) for m in marks))
     if off:
         again = Touch.from_data(without(touch.data, marks, touch.outliers + off), **estimation)
         touch = dataclasses.replace(again, outliers=touch.outliers + off + again.outliers)
-    found = search(touch)
-    return touch, dataclasses.replace(found, work=found.work + first.work)
+    return touch, _both(first, search(touch))
+
+
+def _both(first, found):
+    """The outcome ``found`` with the work and the budget of ``first`` added, settled only when both were."""
+    allowed = None if first.allowed is None or found.allowed is None else first.allowed + found.allowed
+    return dataclasses.replace(found, work=found.work + first.work, allowed=allowed,
+                               settled=bool(first.settled and found.settled))

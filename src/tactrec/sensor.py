@@ -198,7 +198,7 @@ def _pushed_out(model, centres: np.ndarray, radius: float, across: np.ndarray, i
         if not np.any(np.abs(short) > 1e-9 * max(radius, 1.0)):
             break
         u = np.asarray(n, dtype=np.float64)
-        u = u - (u @ across)[:, None] * across[None]
+        u = u - np.sum(u * across[None], axis=1)[:, None] * across[None]       # element-wise: no BLAS
         held = np.sum(u * u, axis=1)                     # how much of the distance a move along u changes
         centres = centres + np.where(held > 1e-6, short / np.maximum(held, 1e-6), 0.0)[:, None] * u
     return centres
@@ -221,7 +221,9 @@ def tip_centres(model, points: np.ndarray, radius: float, *, across: np.ndarray 
     alike: over a convex edge the arc the centre sweeps about it, in a hollow tighter than the tip
     the place where it touches both sides) and sampled again at the surface points' own steps along
     it, from the point nearest ``anchor`` (default: the middle point).  A tip there touches the
-    surface at its closest point and enters it nowhere."""
+    surface at its closest point and enters it nowhere.  A ``ValueError`` where the plane holds no
+    such centre near a point (a hollow too narrow for the tip in that plane): no tip traces that
+    stroke."""
     x = np.asarray(points, dtype=np.float64)
     if across is None:
         along = np.linalg.svd(x - x.mean(axis=0))[2][0]
@@ -229,7 +231,9 @@ def tip_centres(model, points: np.ndarray, radius: float, *, across: np.ndarray 
     across = np.asarray(across, dtype=np.float64) / np.linalg.norm(across)
     centres = _pushed_out(model, x, radius, across, iterations)
     steps = np.linalg.norm(np.diff(x, axis=0), axis=1)
-    piece = max(float(steps.min()), 1e-12) / 8.0
+    piece = float(steps[steps > 0].min(initial=np.inf)) / 8.0
+    if not np.isfinite(piece):
+        raise ValueError("a stroke whose points are all one point")
     cuts = np.maximum(np.ceil(np.linalg.norm(np.diff(centres, axis=0), axis=1) / piece).astype(int), 1)
     filled = [centres[:1]]
     for i, k in enumerate(cuts):
@@ -241,5 +245,10 @@ def tip_centres(model, points: np.ndarray, radius: float, *, across: np.ndarray 
     k = len(x) // 2 if anchor is None else int(np.argmin(np.linalg.norm(x - anchor, axis=1)))
     want = s[start[k]] + (_arc_length(x) - _arc_length(x)[k])
     inside = (want >= s[0]) & (want <= s[-1])
-    out = np.stack([np.interp(want[inside], s, dense[:, j]) for j in range(3)], axis=1)
-    return _pushed_out(model, out, radius, across, iterations)
+    out = _pushed_out(model, np.stack([np.interp(want[inside], s, dense[:, j]) for j in range(3)], axis=1),
+                      radius, across, iterations)
+    gap = np.abs(np.asarray(Offset(model, radius).planes(out)[0], dtype=np.float64))
+    if np.any(gap > 1e-6 * max(radius, 1.0)):
+        raise ValueError(f"a tip of radius {radius:g} cannot follow this stroke in its plane (a hollow too "
+                         "narrow for it)")
+    return out

@@ -94,8 +94,7 @@ def corrected(geometry: LocalGeometry, r: float) -> LocalGeometry | None:
     ``-EDGE`` (module text)."""
     if 1.0 + r * float(np.min(geometry.normal_curvatures)) <= -EDGE:       # the tightest bend measured
         return None
-    k1 = geometry.k1 / max(1.0 + r * geometry.k1, SHARP)
-    k2 = geometry.k2 / max(1.0 + r * geometry.k2, SHARP)
+    k1, k2 = (max(k, -1.0 / r) / max(1.0 + r * k, SHARP) for k in (geometry.k1, geometry.k2))   # an edge: -1/(SHARP r)
     c = np.sum(geometry.tangents * geometry.directions[0], axis=1)
     s = np.sum(geometry.tangents * geometry.directions[1], axis=1)
     kn = (k1 * c * c + k2 * s * s) / (c * c + s * s)
