@@ -354,7 +354,8 @@ class Recognizer:
         the mean distance over all those points that counts as a fit (0: this touch's own limit).
         ``among``: the names of the models to search (None: all); the others are rejected as not
         searched.  ``budget``: the most work (closest-point queries) the search may spend in all, when
-        lower than the method's own budget; the first round runs whatever it costs.  ``context_tips``:
+        lower than the method's own budget; the first round runs whatever it costs (a touch with outliers
+        is searched twice, each search within it: :func:`tactrec.outliers.judge_ends`).  ``context_tips``:
         the tip radius of each context curve and ``context_surface`` the curves moved onto the surface
         (:mod:`tactrec.tip`; None: no tip)."""
         start = time.perf_counter()
