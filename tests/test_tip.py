@@ -64,9 +64,8 @@ def test_a_sphere_touched_with_a_tip_gives_its_own_curvature(r):
 
 def test_the_correction_is_the_offset_formula():
     """kappa / (1 + r kappa) per principal curvature, the contact moved by -r N; a bend at the tip's radius
-    (a sharp edge, 1 + r kappa = 0) or up to EDGE tighter is a sharp edge's (radius SHARP r); beyond
-    it, in a curve's own normal curvature, None."""
-    from tactrec.tip import EDGE, SHARP
+    (a sharp edge, 1 + r kappa = 0) or tighter is a sharp edge's (radius SHARP r)."""
+    from tactrec.tip import SHARP
 
     from tactrec.estimation import LocalGeometry
 
@@ -75,9 +74,38 @@ def test_the_correction_is_the_offset_formula():
     c = corrected(g, 2.0)
     assert np.isclose(c.k1, 0.1 / 1.2) and np.isclose(c.k2, -0.2 / 0.6)
     assert np.allclose(c.contact, [0.0, 0.0, -2.0]) and np.allclose(c.normal_curvatures, [c.k1, c.k2])
-    for r in (5.0, 5.5):                           # an edge: the surface's radius there SHARP r
+    for r in (5.0, 5.5, 7.0):                      # an edge: the surface's radius there SHARP r
         assert np.isclose(corrected(g, r).k2, -1.0 / (SHARP * r))
-    assert corrected(g, (1.0 + EDGE) / 0.2) is None and corrected(g, 7.0) is None
+
+
+def test_a_bend_is_judged_over_the_curves_length():
+    """A circular arc's bend is its curvature, never tighter (great circles of a ball of 3 mm, 0.8 rad
+    either side: within 5% of -1/3); the centres of a tip
+    rounding a sharp edge (two straight pieces joined by an arc of the tip's radius) bend far more
+    gently over the curve than at the kink, so a tip of that radius traces them."""
+    from tactrec.estimation import estimate
+    from tactrec.tip import bends, traceable
+
+    ball = _ball_touch(3.0, 5.0, outward=True)
+    g = estimate(ball)
+    b = bends(ball.curves, g)
+    assert np.all(b >= -1.0 / 3.0) and np.all(b < -0.95 / 3.0)
+    assert not traceable(ball.curves, g, 5.0) and traceable(ball.curves, g, 2.0)
+    r, curves = 2.0, []
+    for a in np.deg2rad([0.0, 60.0, 120.0]):             # a roof ridge along y, its faces at 45 degrees
+        u = np.array([np.cos(a), np.sin(a), 0.0])
+        s = np.linspace(-12.0, 12.0, 49)
+        across = s * u[0]                               # across the ridge
+        along = s * u[1]
+        # the tip's centre over a ridge with faces z = -|x|: an arc of radius r above it, then lines
+        h = np.where(np.abs(across) <= r / np.sqrt(2.0), np.sqrt(np.maximum(r * r - across ** 2, 0.0)),
+                     r * np.sqrt(2.0) - np.abs(across))
+        curves.append(np.stack([across, along, h], axis=1))
+    data = TactileData.from_arrays(curves, outward=[0.0, 0.0, 1.0], contact=[0.0, 0.0, r], units="mm",
+                                   source="ridge.json", tip_radius=r)
+    g = estimate(data)
+    assert traceable(data.curves, g, r)
+    assert Touch.from_data(data).tip == r
 
 
 def test_the_offset_of_a_closed_form_surface_is_measured_to_the_foot_point():

@@ -116,7 +116,8 @@ def _warn(line: str) -> None:
 def cmd_build(args) -> int:
     from .database import build_database
 
-    report = build_database(args.models, args.out, quiet=args.quiet, units=args.units, scale=args.scale)
+    report = build_database(args.models, args.out, quiet=args.quiet, units=args.units, scale=args.scale,
+                            tips=args.tip_radius or ())
     if not args.quiet:
         removed = f", {len(report.removed)} old file(s) removed" if report.removed else ""
         print(f"{report.path}: {len(report.built)} built, {len(report.reused)} unchanged{removed}")
@@ -262,6 +263,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "(closed-form, paper-table1, ...)")
     p.add_argument("--out", required=True, metavar="DB", help="database folder")
     _mesh_options(p)
+    p.add_argument("--tip-radius", type=float, nargs="+", metavar="R",
+                   help="store each mesh's field offset by these tip radii (the meshes' units), so that "
+                   "touches of such a tip need not build it on first use")
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
     p.set_defaults(func=cmd_build)
 
@@ -328,6 +332,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "(fig11, other): which sets to run (default all)")
     p.add_argument("--strategies", type=lambda text: text.split(","), metavar="NAME,...",
                    help="multi-touch: which next-touch strategies to run (random, next; default both)")
+    p.add_argument("--settings", type=lambda text: text.split(","), metavar="NAME,...",
+                   help="sensor: which settings to run besides clean ('tip 1 mm', 'outliers 3%%', ...; default all)")
     p.add_argument("--out", metavar="DIR", help="output folder (default bench-out)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_bench)

@@ -67,6 +67,13 @@ def cmd_bench(args) -> int:
         if args.name != "multi-touch":
             raise InputError("--strategies applies to multi-touch only", args.name)
         extra["strategies"] = _known(args.strategies, STRATEGIES, "strategy", "--strategies", args.name)
+    if args.settings is not None:
+        from .bench.sensor import SETTINGS
+
+        if args.name != "sensor":
+            raise InputError("--settings applies to sensor only", args.name)
+        extra["settings"] = ("clean",) + tuple(s for s in _known(args.settings, SETTINGS, "setting", "--settings",
+                                                                 args.name) if s != "clean")
     if args.paper_option:
         extra["options"] = dict(args.paper_option)
     if args.delta_only or args.lengths or args.angles:

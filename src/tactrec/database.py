@@ -185,28 +185,33 @@ def load_database(path: str | os.PathLike, *, warn=None) -> Database:
     return Database(entries, db)
 
 
-def _stored_blob(model) -> tuple[bytes, int]:
-    """A model's database file (its arrays and its table, compressed) and its table's rows."""
+def _stored_blob(model, tips=()) -> tuple[bytes, int]:
+    """A model's database file (its arrays and its table, compressed) and its table's rows; a mesh's
+    with the fields of its offsets by the tip radii ``tips`` (:mod:`tactrec.surfaces.mesh_offset`)."""
     entry = model_entry(model)
     arrays = dict(model.to_store(), **entry.table.to_arrays())
+    if tips and model.kind == "mesh":
+        from .surfaces.mesh_offset import offset_arrays
+
+        arrays.update(offset_arrays(model, tips))
     buffer = io.BytesIO()
     np.savez_compressed(buffer, **arrays)
     return buffer.getvalue(), len(entry.table)
 
 
-def _start_builder(models: list) -> None:
-    _BUILDER[:] = [models]
+def _start_builder(models: list, tips) -> None:
+    _BUILDER[:] = [models, tips]
 
 
 def _stored_in_worker(k: int) -> tuple[bytes, int]:
-    return _stored_blob(_BUILDER[0][k])
+    return _stored_blob(_BUILDER[0][k], _BUILDER[1])
 
 
 #: in a build's worker process only: the models it was forked with (set by the pool's initializer)
 _BUILDER: list = []
 
 
-def _stored(models: list, todo: list[int], *, quiet: bool) -> list[tuple[bytes, int]]:
+def _stored(models: list, todo: list[int], *, quiet: bool, tips=()) -> list[tuple[bytes, int]]:
     """:func:`_stored_blob` of ``models[k]`` for each ``k`` of ``todo``, in order: in two forked
     worker processes when there are two or more (a scan's distance field and tables take a second or
     two each), else here."""
@@ -220,12 +225,12 @@ def _stored(models: list, todo: list[int], *, quiet: bool) -> list[tuple[bytes, 
     if jobs < 2 or nested or "fork" not in multiprocessing.get_all_start_methods():
         out = []
         for k in todo:
-            out.append(_stored_blob(models[k]))
+            out.append(_stored_blob(models[k], tips))
             bar.update()
         bar.close()
         return out
     with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("fork"), initializer=_start_builder,
-                             initargs=(models,)) as pool:
+                             initargs=(models, tips)) as pool:
         out = []
         for found in pool.map(_stored_in_worker, todo):
             out.append(found)
@@ -235,13 +240,19 @@ def _stored(models: list, todo: list[int], *, quiet: bool) -> list[tuple[bytes, 
 
 
 def build_database(models: Iterable, out: str | os.PathLike, *, quiet: bool = False, units: str | None = None,
-                   scale: float | None = None) -> BuildReport:
+                   scale: float | None = None, tips: Iterable[float] = ()) -> BuildReport:
     """Build (or update) the database ``out`` from model files or built-in names.
 
-    Models whose source file, options (``units``, ``scale`` of mesh files)
-    and table builder are unchanged are reused; the others are rebuilt.  The
-    database afterwards holds exactly ``models``.
+    Models whose source file, options (``units``, ``scale`` of mesh files,
+    ``tips``) and table builder are unchanged are reused; the others are
+    rebuilt.  The database afterwards holds exactly ``models``.  ``tips``:
+    radii of round tips (the meshes' units) whose offset fields each mesh
+    stores (:mod:`tactrec.surfaces.mesh_offset`), so that touches of such a
+    tip are searched without building them first.
     """
+    tips = sorted({float(r) for r in tips})
+    if not all(np.isfinite(r) and r > 0 for r in tips):
+        raise InputError(f"a tip radius is a positive number (got {tips})", out)
     out = Path(out)
     sources = resolve_models(models)
     if not sources:
@@ -263,6 +274,8 @@ def build_database(models: Iterable, out: str | os.PathLike, *, quiet: bool = Fa
         sha = file_sha256(src.path)
         options = {"units": units if units is not None else src.units,
                    "scale": scale if scale is not None else src.scale} if model.kind == "mesh" else {}
+        if tips and model.kind == "mesh":
+            options["tips"] = tips
         prev = old.get(model.name)
         fresh = not (prev and prev["source_sha256"] == sha and prev.get("table_version") == TABLE_VERSION
                      and prev.get("options", {}) == options
@@ -270,7 +283,7 @@ def build_database(models: Iterable, out: str | os.PathLike, *, quiet: bool = Fa
                      and file_sha256(out / prev["file"]) == prev["file_sha256"])
         plans.append((src, model, sha, options, prev, fresh))
     todo = [k for k, plan in enumerate(plans) if plan[5]]
-    blobs = dict(zip(todo, _stored(models, todo, quiet=quiet)))
+    blobs = dict(zip(todo, _stored(models, todo, quiet=quiet, tips=tips)))
     for k, (src, model, sha, options, prev, fresh) in enumerate(plans):
         if not fresh:
             items.append(dict(prev, source=str(src.path)))

@@ -9,9 +9,10 @@ units, once per unit scale.
 A touch whose points are the centres of a round tip (``tip_radius`` > 0) is
 handled by the one rule of :mod:`tactrec.tip`: its estimate is the surface's
 (the contact moved by ``-r N``, each principal curvature ``kappa / (1 + r
-kappa)``), the stages that read its local shape or a model's distance field
-take its points moved onto the surface (:meth:`Touch.on_surface`, one copy
-per side of the normal tried), and every exact distance is measured from its
+kappa)``), the stages that read a mesh's places or distance field take its
+centres as a touch of the mesh offset by the tip (:meth:`Touch.searched`; or
+its points moved onto the surface, :meth:`Touch.on_surface`, one copy per
+side of the normal tried), and every exact distance is measured from its
 points, the centres, against the model offset by the tip
 (:meth:`Touch.exact`).
 
@@ -32,7 +33,7 @@ from .errors import InputError
 from .estimation import LocalGeometry, estimate, noise_level
 from .io.touch import TactileData
 from .outliers import kept
-from .tip import EDGE, corrected, offset, surface_curves
+from .tip import EDGE, bends, corrected, offset, surface_curves, traceable
 
 __all__ = ["Touch", "subset"]
 
@@ -74,6 +75,9 @@ class Touch:
         The tip's radius of each context curve (data units; empty: all 0).
     context_surface : tuple of (n_i, 3) arrays
         The context curves moved onto the surface (data units; empty: the context as given).
+    centres : LocalGeometry or None
+        With a tip: the estimate of the centres themselves (data units), as the search of the
+        surface offset by the tip takes it (:meth:`searched`).
     outliers : int
         How many of the points as read were set aside as off their curve's trace
         (:mod:`tactrec.outliers`); ``data`` holds the points kept.
@@ -90,6 +94,7 @@ class Touch:
     context_tips: tuple = ()
     context_surface: tuple = ()
     outliers: int = 0
+    centres: LocalGeometry | None = None
 
     @classmethod
     def from_data(cls, data: TactileData, *, window: int | str | None = "auto", degree: int = 3,
@@ -110,18 +115,18 @@ class Touch:
             return dataclasses.replace(self, estimate=geometry)
         sides = []
         for sign in (1,) if geometry.oriented else (1, -1):
-            surface = corrected(geometry if sign == 1 else geometry.flipped(), tip)
-            if surface is not None:
-                sides.append((sign, surface, surface_curves(data.curves, geometry, tip, sign)))
+            side = geometry if sign == 1 else geometry.flipped()
+            if traceable(data.curves, side, tip):
+                sides.append((sign, corrected(side, tip), surface_curves(data.curves, geometry, tip, sign)))
         if not sides:
-            kn = geometry.normal_curvatures
+            kn = bends(data.curves, geometry)
             bend = 1.0 / (-np.min(kn) if geometry.oriented else max(-np.min(kn), np.max(kn)))
             raise InputError(f"tip_radius {tip:g}: the curves bend more tightly (radius {bend:.3g}) than a tip of "
                              f"that radius can trace any surface (a sharp edge's bend: {1 / (1 + EDGE):g} x the radius "
                              "or more)", data.source)
         sign, surface, _ = sides[0]
         return dataclasses.replace(self, estimate=surface if sign == 1 else surface.flipped(), tip=tip,
-                                   sides_data=tuple(sides))
+                                   sides_data=tuple(sides), centres=geometry)
 
     @cached_property
     def curves(self) -> tuple[np.ndarray, ...]:
@@ -217,6 +222,24 @@ class Touch:
             self._surfaces[sign] = dataclasses.replace(self, data=data, estimate=g, tip=0.0, sides_data=(),
                                                        context=context, context_tips=(), context_surface=())
         return self._surfaces[sign]
+
+    def searched(self, model, sign: int) -> tuple:
+        """What a search poses on side ``sign`` of a mesh ``model`` (:mod:`tactrec.tip`, (a)): the
+        model as the search sees it, the touch whose points it poses there and that touch's estimate
+        on the side (normal as tried).  Where every joint
+        curve has one tip radius ``r`` > 0: the mesh offset by ``r``
+        (:class:`tactrec.surfaces.mesh_offset.OffsetMesh`) and the centres themselves, with their
+        own estimate (a plain touch of the offset surface); else the model and :meth:`on_surface`."""
+        tips = self.joint_tips
+        if model.kind == "mesh" and self.tip > 0 and np.all(tips == tips[0]):
+            if "centres" not in self._surfaces:
+                data = dataclasses.replace(self.data, tip_radius=0.0)
+                self._surfaces["centres"] = dataclasses.replace(
+                    self, data=data, estimate=self.centres, tip=0.0, sides_data=(), context_tips=(),
+                    context_surface=())
+            view = self._surfaces["centres"]
+            return model.offset(float(tips[0])), view, view.oriented(sign)
+        return model, self.on_surface(sign), self.oriented(sign)
 
     @cached_property
     def joint_tips(self) -> np.ndarray:

@@ -228,7 +228,10 @@ def judge_ends(touch, search, residuals, estimation: dict):
     marks = ends_off(touch.curves, residuals(best, touch), touch.noise, touch.data.spacing)
     off = int(sum(int(m.sum()) for m in marks))
     if off:
-        again = Touch.from_data(without(touch.data, marks, touch.outliers + off), **estimation)
+        try:
+            again = Touch.from_data(without(touch.data, marks, touch.outliers + off), **estimation)
+        except InputError:                     # the ends are what makes it a touch: they are kept
+            return touch, _both(first, search(touch))
         touch = dataclasses.replace(again, outliers=touch.outliers + off + again.outliers)
     return touch, _both(first, search(touch))
 

@@ -6,24 +6,30 @@ point is the contact, at distance ``r``, along the surface's outward normal
 there.  A touch's ``tip_radius`` (:class:`tactrec.io.touch.TactileData`) is
 that ``r``; tactrec handles it by one rule:
 
-(a) **the search works on the data moved onto the surface.**  Every stage
-    that reads the data's local shape or a model's truncated distance field
+(a) **the search of a mesh is a search of the offset surface.**  Every
+    stage that reads a mesh's places, curvatures or truncated distance field
     (the curvature lookup and the places, the field screen and its field
-    steps, a closed-form surface's table rows and first turn) takes each
-    centre ``x_i`` moved to ``x_i - r n_i`` (:func:`surface_curves`), ``n_i``
-    the outward normal of the offset surface at ``x_i`` as the data's own
-    local fit gives it: the estimate's curvature tensor at the contact
-    (its normal tilts by ``-S (x_i - p)``, ``S`` the shape operator) made
-    perpendicular to the curve's own tangent at ``x_i`` (a polynomial in arc
-    length along the curve), so the curve's own bend is followed exactly and
-    only the tilt across its plane is the tensor's.  At the contact this is
-    the offset correction of the estimate (:func:`corrected`): the contact
-    moves by ``-r N`` and each principal curvature (convex negative, outward
-    ``N``) becomes ``kappa / (1 + r kappa)``; offset surfaces share their
-    normals and principal directions.  A field lookup beyond the band of a
-    mesh's truncated field (about 1.4 mean edges, :mod:`tactrec.surfaces.mesh_field`)
-    returns the truncation, so the centres themselves, ``r`` off the
-    surface, could not be screened on it.
+    steps, the local grid) takes the centres as they are, with their own
+    estimate, as a plain touch of the mesh offset by ``r``
+    (:class:`tactrec.surfaces.mesh_offset.OffsetMesh`: each place lifted by
+    ``r`` along its normal, each principal curvature ``kappa / (1 - r
+    kappa)``, the field of the signed distance minus ``r``;
+    :meth:`tactrec.features.Touch.searched`).  Nothing is moved along a normal
+    the data do not give: far from the contact the data's own local fit
+    tilts its normals by millimetres' worth, and at a sharp feature, where a
+    tip's centres round the edge, the data normal is tens of degrees off.
+    Where the touch and its context (a session's other touches) have
+    different tips, and on closed-form surfaces (their table rows and first
+    turn), these stages take each centre ``x_i`` moved to ``x_i - r n_i``
+    (:func:`surface_curves`), ``n_i`` the outward normal of the offset
+    surface at ``x_i`` as the data's own local fit gives it: the estimate's
+    curvature tensor at the contact (its normal tilts by ``-S (x_i - p)``,
+    ``S`` the shape operator) made perpendicular to the curve's own tangent
+    at ``x_i`` (a polynomial in arc length along the curve).  At the contact
+    this is the offset correction of the estimate (:func:`corrected`): the
+    contact moves by ``-r N`` and each principal curvature (convex negative,
+    outward ``N``) becomes ``kappa / (1 + r kappa)``; offset surfaces share
+    their normals and principal directions.
 
 (b) **every exact distance is measured from the raw centres against the
     offset surface**: the signed distance minus ``r`` (:class:`Offset`).
@@ -44,19 +50,19 @@ same on both (the centres are always outside).
 Where ``1 + r kappa <= 0`` the centres bend (convex, radius ``<= r``) more
 tightly than a tip can follow any surface.  Exactly ``1 + r kappa = 0`` is
 a sharp convex edge: the centres circle it at the radius ``r``, and the
-estimate scatters about that value.  So a bend up to :data:`EDGE` tighter
-(``1 + r kappa > -EDGE``, a bend radius above ``r / (1 + EDGE)``)
-is read as such an edge, its ``1 + r kappa`` taken as :data:`SHARP` (a
-surface radius of ``SHARP r``).  A tighter bend is not a guess where the
-curves themselves show it: where a curve's own normal curvature at the
-contact (what the data measure directly) is beyond ``-EDGE``, that side is
-not tried.  A principal curvature beyond it, where no curve's is, is the
-estimate's extrapolation (Euler's formula fitted to the curves' normal
-curvatures overshoots at a kink of the centres' path, where a tip leaves
-one face for another) and is read as an edge's like the rest.  A touch with
-no side left is an
-:class:`~tactrec.errors.InputError` naming its file
-(:meth:`tactrec.features.Touch.with_estimate`).
+estimate scatters about that value; at a kink of the centres' path (a tip
+leaving one face for another) a local fit overshoots it.  So the corrected
+estimate reads ``1 + r kappa`` below :data:`SHARP` as an edge's (a surface
+radius of ``SHARP r``), and which side a tip could have traced is judged
+over the curves' whole length, not at the contact: each curve's bend
+(:func:`bends`, a parabola in arc length through the contact, never
+tighter than a circular arc it fits and averaging a kink over the curve).
+Where a curve's bend is convex beyond ``-EDGE`` (``1 + r kappa <= -EDGE``,
+a radius under ``r / (1 + EDGE)``), that side is not tried; a touch with
+no side left is an :class:`~tactrec.errors.InputError` naming its file
+(:meth:`tactrec.features.Touch.with_estimate`).  The search itself
+(a) does not read the corrected estimate: a wrong edge reading costs
+nothing but the estimate reported.
 
 With ``r = 0`` nothing here runs: the touch and the models are used as they
 are.
@@ -70,7 +76,7 @@ import numpy as np
 
 from .estimation import LocalGeometry
 
-__all__ = ["EDGE", "SHARP", "corrected", "surface_normals", "surface_curves", "Offset", "offset", "foot_distance",
+__all__ = ["EDGE", "SHARP", "bends", "traceable", "corrected", "surface_normals", "surface_curves", "Offset", "offset", "foot_distance",
            "FOOT_STEPS"]
 
 #: tangent-plane steps of :func:`foot_distance` (each one implicit evaluation; the tangential error
@@ -85,15 +91,37 @@ SHARP = 0.05
 TANGENT_DEGREE = 6
 
 
-def corrected(geometry: LocalGeometry, r: float) -> LocalGeometry | None:
+def bends(curves, geometry: LocalGeometry) -> np.ndarray:
+    """Each curve's bend over its whole length ``(k,)``: the normal curvature of the parabola
+    ``h = a s + kappa s^2 / 2`` fitted (least squares) to the heights ``h`` of its points over the
+    tangent plane at ``geometry``'s contact (along its normal) against their arc length ``s`` from
+    the contact (convex negative).  A circular arc's is never tighter than the arc, and a kink (a
+    tip's centres rounding an edge, where a local fit overshoots) is averaged over the curve."""
+    out = []
+    for curve in curves:
+        x = np.asarray(curve, dtype=np.float64)
+        step = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(x, axis=0), axis=1))])
+        s = step - step[int(np.argmin(np.linalg.norm(x - geometry.contact, axis=1)))]
+        h = np.sum((x - geometry.contact) * geometry.normal, axis=1)                 # element-wise: no BLAS
+        q = 0.5 * s * s                                                                # normal equations, no BLAS
+        ss, sq, qq, sh, qh = (float(np.sum(a * b)) for a, b in ((s, s), (s, q), (q, q), (s, h), (q, h)))
+        det = ss * qq - sq * sq
+        out.append((ss * qh - sq * sh) / det if det > 0 else 0.0)
+    return np.array(out, dtype=np.float64)
+
+
+def traceable(curves, geometry: LocalGeometry, r: float) -> bool:
+    """Whether a tip of radius ``r`` could trace ``curves`` with ``geometry.normal`` outward: no
+    curve's bend (:func:`bends`) is convex more tightly than ``r / (1 + EDGE)`` (module text)."""
+    return bool(1.0 + r * float(np.min(bends(curves, geometry))) > -EDGE)
+
+
+def corrected(geometry: LocalGeometry, r: float) -> LocalGeometry:
     """The surface's estimate at the contact from the offset data's ``geometry`` (normal as the side
     to try: the outward one): contact moved by ``-r N``, ``kappa -> kappa / (1 + r kappa)`` for the
     principal curvatures (and, by Euler's theorem, the normal curvatures along the tangents);
-    directions, tangents and normal kept.  ``1 + r kappa`` below :data:`SHARP` but above ``-EDGE`` is
-    a sharp edge's (taken as :data:`SHARP`); None where a curve's own normal curvature is at or below
-    ``-EDGE`` (module text)."""
-    if 1.0 + r * float(np.min(geometry.normal_curvatures)) <= -EDGE:       # the tightest bend measured
-        return None
+    directions, tangents and normal kept.  ``1 + r kappa`` below :data:`SHARP` is a sharp edge's
+    (taken as :data:`SHARP`, the curvature at least ``-1 / r``: module text)."""
     k1, k2 = (max(k, -1.0 / r) / max(1.0 + r * k, SHARP) for k in (geometry.k1, geometry.k2))   # an edge: -1/(SHARP r)
     c = np.sum(geometry.tangents * geometry.directions[0], axis=1)
     s = np.sum(geometry.tangents * geometry.directions[1], axis=1)

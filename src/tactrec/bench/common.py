@@ -130,7 +130,7 @@ def _default(obj):
 
 #: the sources every recognition depends on (files, or folders of ``.py`` files, relative to the package)
 CORE_SOURCES = ("io", "estimation.py", "features.py", "linalg.py", "simulation.py", "tables.py", "recognition.py",
-                "surfaces", "registration", "methods", "engine")
+                "runner.py", "tip.py", "outliers.py", "probability.py", "surfaces", "registration", "methods", "engine")
 
 
 def sources_hash(*relative: str) -> str:

@@ -7,8 +7,10 @@ time (:class:`tactrec.sensor.Imperfections`), then all of them together (:data:`
 recognised with ``fast`` against the whole set.  Per scan set, protocol and setting: top-1
 accuracy, how many touches were refused (an input error: the data as recorded are not a touch
 the package takes), and the recognition's seconds (median / p95 / max), beside the clean
-setting's on the same touches.  A stroke that a tip cannot follow in its plane (a hollow too narrow
-for it: :func:`tactrec.sensor.tip_centres`) is no touch a sensor records: counted apart
+setting's on the same touches.  A tip's offset fields are built before the timed recognitions,
+as the models' own fields are (a database built with ``--tip-radius`` stores them).  A stroke that
+a tip cannot follow in its plane (a hollow too narrow for it: :func:`tactrec.sensor.tip_centres`)
+is no touch a sensor records: counted apart
 (``untraceable`` in the JSON), not in the accuracy.
 
 Targets (:data:`TARGETS`): with the tip radius given, P3 at radii 1, 2 and 5 mm at least 99% of
@@ -68,6 +70,11 @@ def _touch(task) -> dict:
         _, touch = _simulate(entry, m_index, instance, seed, protocol, Imperfections(**SETTINGS[setting]))
     except ValueError as exc:                  # no such sensor records this stroke (a tip too large for a hollow)
         return dict(row, recognized=None, refused=None, untraceable=str(exc), seconds=None)
+    tip = float(SETTINGS[setting].get("tip_radius", 0.0))
+    if tip > 0:                                # as a database built with the tip stores them: not timed
+        for e in db.entries:
+            if e.model.kind == "mesh":
+                e.model.offset(tip).distance_field
     try:
         rec = recognizer(db.entries).recognize(touch)
     except InputError as exc:                  # the data as recorded are not a touch the package takes
@@ -98,21 +105,23 @@ def _summary(rows: list[dict]) -> dict:
 
 
 def run(*, out, instances: int = 3, seed: int = 0, jobs: int | None = None, quiet: bool = False, sets=SCAN_SETS,
-        **_ignored) -> dict:
-    """Recognise every setting's touches; write ``sensor.json`` and ``sensor.md``."""
+        settings=tuple(SETTINGS), **_ignored) -> dict:
+    """Recognise every setting's touches (of ``settings``, names of :data:`SETTINGS`, clean among
+    them); write ``sensor.json`` and ``sensor.md``."""
     out = Path(out)
     folder = out / "sensor.parts" / _code_hash()
     folder.mkdir(parents=True, exist_ok=True)
-    tasks = [(scans, m, i, seed, p, s) for scans in sets for p in PROTOCOLS for s in SETTINGS
+    tasks = [(scans, m, i, seed, p, s) for scans in sets for p in PROTOCOLS for s in settings
              for m in range(len(_models(scans))) for i in range(instances)]
     rows = run_parallel(_saved, [(t, folder) for t in tasks], jobs=jobs or 1, quiet=quiet, desc="sensor")
     summary = {}
     for scans in sets:
         for p in PROTOCOLS:
-            for s in SETTINGS:
+            for s in settings:
                 chosen = [r for r in rows if (r["scans"], r["protocol"], r["setting"]) == (scans, p, s)]
                 summary[f"{scans}/{p}/{s}"] = _summary(chosen)
-    table = {"benchmark": "sensor", "method": "fast", "instances": instances, "seed": seed, "settings": SETTINGS,
+    table = {"benchmark": "sensor", "method": "fast", "instances": instances, "seed": seed,
+             "settings": {s: SETTINGS[s] for s in settings},
              "targets": TARGETS, "summary": summary, "rows": rows}
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / "sensor.json", table)
@@ -129,7 +138,7 @@ def _text(table: dict, sets) -> str:
     for scans in sets:
         for p in PROTOCOLS:
             clean = s[f"{scans}/{p}/clean"]
-            for name in SETTINGS:
+            for name in table["settings"]:
                 x = s[f"{scans}/{p}/{name}"]
                 gap = x["accuracy_percent"] - clean["accuracy_percent"]
                 ratio = (x["seconds"][0] / clean["seconds"][0]) if x["seconds"] and clean["seconds"] else None

@@ -4,9 +4,10 @@ Step 1, the cheap stage (:func:`_cheap`); step 3, refinement (:func:`_refined`);
 (:func:`_polished`); and closed-form surfaces (:func:`_closed_form`).
 
 A touch with a round tip follows the one rule of :mod:`tactrec.tip`: the places, the field screen,
-its field steps and local grid take the touch moved onto the surface on the side tried
-(:meth:`~tactrec.features.Touch.on_surface`); every exact step and error is measured from the
-centres against the model offset by the tip (:meth:`~tactrec.features.Touch.exact`).
+its field steps and local grid take the mesh and the touch as the search sees them
+(:meth:`~tactrec.features.Touch.searched`: the centres on the mesh offset by the tip); every exact
+step and error is measured from the centres against the model offset by the tip
+(:meth:`~tactrec.features.Touch.exact`).
 """
 
 from __future__ import annotations
@@ -28,15 +29,15 @@ if TYPE_CHECKING:
 
 __all__ = ["tier_span", "field_stages"]
 
-def _places(held, index: int, touch, sign: int, config: FastConfig, every: bool):
-    """The model's places in order for this touch and normal, computed once per touch."""
+def _places(held, index: int, model, touch, g, sign: int, config: FastConfig, every: bool):
+    """The places of ``model`` (the mesh of entry ``index`` as the search sees it:
+    :meth:`~tactrec.features.Touch.searched`) in order for ``touch`` (the touch posed there) and
+    its estimate ``g`` on side ``sign``, computed once per touch."""
     key = (touch.key, index, sign, every)
     if key not in held.cache:
         if len(held.cache) > 8 * len(held.entries) + 8:           # another touch: forget the last one's
             held.cache.clear()
-        model = held.entries[index].model
-        g = touch.oriented(sign)
-        chosen, _, fit = mesh_fast.places(model, g, touch.on_surface(sign).points, touch.radius, spread=config.spread)
+        chosen, _, fit = mesh_fast.places(model, g, touch.points, touch.radius, spread=config.spread)
         if every:
             field = model.fine_curvatures
             chosen = stable_order(np.hypot(field.k1 - fit[0][0], field.k2 - fit[0][1]))
@@ -44,15 +45,15 @@ def _places(held, index: int, touch, sign: int, config: FastConfig, every: bool)
     return held.cache[key]
 
 
-def _screen_places(held, index: int, touch, sign: int, config: FastConfig) -> np.ndarray:
+def _screen_places(held, index: int, model, touch, g, sign: int, config: FastConfig) -> np.ndarray:
     """The places the field screen takes, in order of curvature gap
     (:func:`tactrec.engine.screen.screen_places`), computed once per touch."""
     key = (touch.key, index, sign, "screen")
     if key not in held.cache:
-        chosen, _ = _places(held, index, touch, sign, config, True)
+        chosen, _ = _places(held, index, model, touch, g, sign, config, True)
         from ..engine.screen import screen_places
 
-        held.cache[key] = screen_places(held.entries[index].model, chosen, touch.radius, step=config.screen_step)
+        held.cache[key] = screen_places(model, chosen, touch.radius, step=config.screen_step)
     return held.cache[key]
 
 
@@ -73,13 +74,16 @@ def field_stages(config: FastConfig, tier) -> tuple:
     return (turns, *config.screen_stages[0][1:]), (2 * turns, *config.screen_stages[-1][1:])
 
 
-def _field_poses(model, t, sign: int, g, spots: np.ndarray, fit, tier, config: FastConfig, context):
+def _field_poses(model, s, g, spots: np.ndarray, fit, tier, config: FastConfig, context, exact, x):
     """A field tier's hypotheses at the places ``spots``: screened on the field with the data's normals
     (or, in a tilted tier, with normals tilted out to ``tier.tilt`` degrees, then each of the best
     few set on a dense local grid: :func:`tactrec.engine.screen.local_screen`), the best
     ``screen_keep`` refined on the field and the best ``2 refine`` of those taking one exact step.
-    ``t`` is the touch, ``sign`` the side of its normal ``g``; ``context`` the other touches' points
-    the screen scores, moved onto the surface.  Returns ``R, t, score, queries, hypotheses screened``."""
+    ``model`` and ``s`` are the mesh and the touch as the search sees them
+    (:meth:`~tactrec.features.Touch.searched`), ``g`` the touch's estimate on the side tried;
+    ``context`` the other touches' points the screen scores; ``exact`` what the exact step measures
+    the touch's points ``x`` against (:meth:`~tactrec.features.Touch.exact`).  Returns ``R, t,
+    score, queries, hypotheses screened``."""
     from ..engine.kernels import field_refine            # numba: only once a search needs it
     from ..engine.screen import DISTINCT, data_normals, local_screen, screen, tilted_normals
 
@@ -88,27 +92,25 @@ def _field_poses(model, t, sign: int, g, spots: np.ndarray, fit, tier, config: F
         normals = [np.stack(tilted_normals(fit[2], g.tangents[0], cone=tier.tilt, step=config.tilt_step))]
     else:
         normals = data_normals(g, fit[2], distinct=DISTINCT)
-    s, exact = t.on_surface(sign), t.exact(model, config.coarse_points)           # (a) and (b) of tactrec.tip
+    field = model.distance_field
     x3, poses, lookups, q, tried = s.joint_subset(3 * config.coarse_points), [], 0, 0, 0
     for dn in normals:
         found = screen(model, g, spots, model.fine_curvatures.normal[spots], s.curves, dn,
                        stages=stages, keep=config.screen_keep, extra=context)
-        R, tr, grid = field_refine(*model.distance_field.args(), found.R, found.t, x3, config.field_steps)
+        R, tr, grid = field_refine(*field.args(), found.R, found.t, x3, config.field_steps)
         lookups += found.lookups + len(R) * len(x3) * (config.field_steps + 1)
         tried += len(found.owner)
         best = stable_order(grid)[:2 * config.refine]
-        poses.append(solve(exact, R[best], tr[best], t.joint_subset(config.coarse_points),
-                           Criteria(1, tolerance=config.tolerance, predict=True)))
+        poses.append(solve(exact, R[best], tr[best], x, Criteria(1, tolerance=config.tolerance, predict=True)))
         q += poses[-1].queries
     R, tr, score = (np.concatenate([getattr(p, k) for p in poses]) for k in ("R", "t", "error"))
     if tier.tilt > 0:
         seeds = stable_order(score)[:config.refine]
         R, tr, _, n = local_screen(model, R[seeds], tr[seeds], s.joint_subset(config.coarse_points), g.contact,
                                    angle=0.6 * config.tilt_step,
-                                   shift=0.75 * config.screen_step * t.radius)
+                                   shift=0.75 * config.screen_step * s.radius)
         lookups += n
-        R, tr, score, q2 = solve(exact, R, tr, t.joint_subset(config.coarse_points),
-                                 Criteria(1, tolerance=config.tolerance, predict=True))
+        R, tr, score, q2 = solve(exact, R, tr, x, Criteria(1, tolerance=config.tolerance, predict=True))
         q += q2
     return R, tr, score, int(lookups * LOOKUP_COST) + q, tried
 
@@ -126,17 +128,17 @@ def _cheap(held, indices, touch, config: FastConfig, k: int) -> list[dict]:
         x, screened = t.joint_subset(config.coarse_points), t.screen_subset(config.coarse_points)
         exact, exact_screened = t.exact(model, config.coarse_points), t.exact(model, config.coarse_points, screen=True)
         poses, queries, tried = [], 0, 0
-        for sign, g in t.sides:
-            chosen, fit = _places(held, index, t, sign, config, tier.places is None)
+        for sign, _ in t.sides:
+            seen, s, g = t.searched(model, sign)                 # (a) of tactrec.tip
+            chosen, fit = _places(held, index, seen, s, g, sign, config, tier.places is None)
             if tier.rotations == "field":
                 start, stop = tier_span(config.tiers, k)
-                spots = _screen_places(held, index, t, sign, config)[start:stop]
+                spots = _screen_places(held, index, seen, s, g, sign, config)[start:stop]
                 if len(spots) == 0:
                     continue
-                s = t.on_surface(sign)
                 context_middles = s.screen_subset(config.coarse_points)[len(s.subset(config.coarse_points)):] \
                     if t.context else None
-                R, tr, score, q, n = _field_poses(model, t, sign, g, spots, fit, tier, config, context_middles)
+                R, tr, score, q, n = _field_poses(seen, s, g, spots, fit, tier, config, context_middles, exact, x)
                 tried, queries = tried + n, queries + q
                 poses.append((R, tr, score, np.full(len(R), sign)))
                 continue
@@ -144,8 +146,8 @@ def _cheap(held, indices, touch, config: FastConfig, k: int) -> list[dict]:
             for lo in range(start, len(chosen) if stop is None else min(stop, len(chosen)), 1000):
                 part = chosen[lo:min(lo + 1000, len(chosen) if stop is None else stop)]
                 tried += len(part)
-                R, tr, owner = mesh_fast.frame_poses(model, g, part, fit, rotations=tier.rotations,
-                                                     umbilic=config.umbilic / t.radius, tilt=tier.tilt)
+                R, tr, owner = mesh_fast.frame_poses(seen, g, part, fit, rotations=tier.rotations,
+                                                     umbilic=config.umbilic / s.radius, tilt=tier.tilt)
                 steps = config.cheap_steps
                 kept = max(config.screen, len(R) // 8)
                 if tier.places is not None and len(R) > kept and steps > 1:

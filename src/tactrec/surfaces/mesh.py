@@ -264,6 +264,20 @@ class MeshModel(SurfaceModel):
         return build_field(self.vertices, self.faces, mean_edge=self.mean_edge)
 
     @cached_property
+    def _offsets(self) -> dict:
+        return {}
+
+    def offset(self, radius: float):
+        """The surface offset outward by ``radius`` as a search sees it (a round tip's centres:
+        :class:`.mesh_offset.OffsetMesh`), made on first use and kept."""
+        from .mesh_offset import OffsetMesh
+
+        key = float(radius)
+        if key not in self._offsets:
+            self._offsets[key] = OffsetMesh(self, key)
+        return self._offsets[key]
+
+    @cached_property
     def fine_curvatures(self) -> CurvatureField:
         """The :class:`~.mesh_curvature.CurvatureField` at three mean edges: every vertex's paraboloid
         fit, its principal curvatures and directions and its fitted normal.

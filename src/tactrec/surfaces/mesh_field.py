@@ -131,9 +131,11 @@ def _candidate_bricks(vertices: np.ndarray, faces: np.ndarray, origin: np.ndarra
 
 
 def build_field(vertices: np.ndarray, faces: np.ndarray, *, mean_edge: float, spacing: float | None = None,
-                band: int = BAND) -> DistanceField:
+                band: int = BAND, offset: float = 0.0) -> DistanceField:
     """The truncated signed distance field of a mesh (see the module text): its spacing is
-    ``SPACING x mean_edge`` unless given."""
+    ``SPACING x mean_edge`` unless given.  With ``offset`` > 0 it is the field of the surface offset
+    outward by that much (the centres of a round tip of that radius, :mod:`tactrec.tip`): the
+    signed distance minus ``offset``, kept within the band of that offset surface."""
     import igl
 
     from ..engine import BRICK
@@ -141,18 +143,26 @@ def build_field(vertices: np.ndarray, faces: np.ndarray, *, mean_edge: float, sp
     h = float(spacing if spacing is not None else SPACING * mean_edge)
     truncation = band * h
     block = BRICK * h
+    r = float(offset)
+    reach = r + truncation
     low, high = vertices.min(axis=0), vertices.max(axis=0)
-    origin = low - truncation - h
-    shape = np.floor((high + truncation + h - origin) / block).astype(np.int64) + 1
-    blocks = _candidate_bricks(vertices, faces, origin, block, truncation, shape)
+    origin = low - reach - h
+    shape = np.floor((high + reach + h - origin) / block).astype(np.int64) + 1
+    blocks = _candidate_bricks(vertices, faces, origin, block, reach, shape)
+    # a brick is kept where a corner lies within the band; the unsigned distance moves by at most the
+    # half diagonal from the brick's centre, so a brick whose centre is farther is not sampled
+    centre = origin + (blocks + 0.5) * block
+    near, _, _ = igl.point_mesh_squared_distance(centre, vertices, faces)
+    blocks = blocks[np.abs(np.sqrt(np.asarray(near, dtype=np.float64)) - r) <= truncation + 0.5 * np.sqrt(3.0) * block
+                    + 1e-9 * block]
     steps = np.arange(BRICK + 1) * h
     corner = origin + blocks * block                                                   # (k, 3)
     grid = np.stack(np.meshgrid(steps, steps, steps, indexing="ij"), axis=-1).reshape(-1, 3)
     points = (corner[:, None, :] + grid[None]).reshape(-1, 3)
     d, _, _, _ = igl.signed_distance(points, vertices, faces, sign_type=igl.SIGNED_DISTANCE_TYPE_PSEUDONORMAL,
-                                     upper_bound=truncation * 1.000001)
-    d = np.clip(np.nan_to_num(np.asarray(d, dtype=np.float64), nan=truncation, posinf=truncation, neginf=-truncation),
-                -truncation, truncation).reshape(len(blocks), -1)
+                                     upper_bound=reach * 1.000001)
+    d = np.nan_to_num(np.asarray(d, dtype=np.float64), nan=reach, posinf=reach, neginf=-reach) - r
+    d = np.clip(d, -truncation, truncation).reshape(len(blocks), -1)
     keep = np.min(np.abs(d), axis=1) < truncation
     blocks, d = blocks[keep], d[keep]
     index = np.full(tuple(shape), -1, dtype=np.int32)
