@@ -82,3 +82,16 @@ def test_a_database_stores_the_offset_fields_of_its_tips(tmp_path, sphere, capsy
     assert build_database([path], db, quiet=True, tips=[1.0]).built == ["ball"]
     assert main(["build", str(path), "--out", str(tmp_path / "bad"), "--tip-radius", "-1"]) == 2
     assert "tip radius" in capsys.readouterr().err
+
+
+def test_a_recognizer_prepares_the_offset_fields_of_its_tips():
+    """``Recognizer(tips=...)`` builds each mesh's offset field before any recognition (and before its
+    workers fork); other radii are left to their first touch."""
+    from tactrec.recognition import ModelEntry, Recognizer
+    from tactrec.tables import CurvatureTable
+
+    tm = trimesh.creation.icosphere(subdivisions=3, radius=RADIUS)
+    model = MeshModel(np.asarray(tm.vertices), np.asarray(tm.faces), name="ball")
+    with Recognizer([ModelEntry(model, CurvatureTable(model.table_samples()))], tips=(TIP,)):
+        assert "distance_field" in model.offset(TIP).__dict__
+        assert "distance_field" not in model.offset(1.0).__dict__

@@ -13,7 +13,7 @@ from tactrec.features import Touch
 from tactrec.io.touch import save_touch
 from tactrec.recognition import Recognizer
 from tactrec.sensor import Imperfections
-from tactrec.simulation import simulate_random_touch
+from tactrec.simulation import simulate_random_touch, truth_pose
 from tactrec.outliers import flagged
 from test_fast import _small_meshes
 
@@ -118,7 +118,7 @@ def test_the_recognition_json_says_how_many(small, tmp_path, capsys):
 
 def _normal_at(model, data, point):
     """The model's unit outward normal ``(3,)`` at ``point`` of ``data`` (the sensor's frame), in that frame."""
-    R, t = np.asarray(data.meta["truth"]["rotation"]), np.asarray(data.meta["truth"]["translation"])
+    R, t = truth_pose(data)
     _, n = model.planes((R @ point + t)[None, None])
     return R.T @ n[0, 0]
 

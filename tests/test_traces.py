@@ -15,7 +15,7 @@ from tactrec.io.meeting import MEETING, check_meeting, meeting
 from tactrec.io.touch import save_touch
 from tactrec.recognition import Recognizer
 from tactrec.sensor import Imperfections
-from tactrec.simulation import simulate_random_touch
+from tactrec.simulation import simulate_random_touch, truth_contact
 from test_fast import _small_meshes
 
 
@@ -42,8 +42,7 @@ def test_curves_that_miss_each_other_meet_at_their_least_squares_point(small):
             entry = small[k % len(small)]
             data = _touch(entry.model, 21, k, imperfections=Imperfections(miss=0.3), noise=0.0)
             point, gaps = meeting(data)
-            R, t = np.asarray(data.meta["truth"]["rotation"]), np.asarray(data.meta["truth"]["translation"])
-            truth = R.T @ (np.asarray(data.meta["truth"]["contact"]) - t)          # model -> data frame
+            truth = truth_contact(data)
             assert np.linalg.norm(point - truth) < 0.6
             assert np.sum(gaps ** 2) <= 3 * 0.3 ** 2 * 1.02             # least squares: no worse than the truth
             result = recognizer.recognize(data)
@@ -91,8 +90,7 @@ def test_one_sided_curves(small):
             halves = tuple(np.asarray(c)[middle:] if rng.random() < 0.5 else np.asarray(c)[:middle + 1]
                            for c in data.curves)
             result = recognizer.recognize(dataclasses.replace(data, curves=halves))
-            R, t = np.asarray(data.meta["truth"]["rotation"]), np.asarray(data.meta["truth"]["translation"])
-            truth = R.T @ (np.asarray(data.meta["truth"]["contact"]) - t)
+            truth = truth_contact(data)
             near = np.linalg.norm(result.estimate.contact - truth) < 0.05
             right += result.best == entry.name and near
     assert right >= 18

@@ -218,6 +218,10 @@ class Recognizer:
     unknown_prior : float
         The prior probability that a touch came from none of the models, in [0, 1)
         (:data:`~tactrec.probability.UNKNOWN_PRIOR`; 0: a closed world).
+    tips : iterable of float
+        Radii of round tips (the models' units) whose offset fields every mesh prepares now, before
+        the workers fork (:mod:`tactrec.surfaces.mesh_offset`; a database built with them stores
+        them), so that no recognition builds them.
     **options
         The method's options (its :class:`~tactrec.methods.base.Config`); a name it does not
         know is an :class:`~tactrec.errors.InputError`.
@@ -225,7 +229,7 @@ class Recognizer:
 
     def __init__(self, models: Iterable[ModelEntry], *, method: str = DEFAULT_METHOD, workers: int = 1,
                  window: int | str | None = "auto", degree: int = 3, curvature_method: str = "auto",
-                 unknown_prior: float = UNKNOWN_PRIOR, **options):
+                 unknown_prior: float = UNKNOWN_PRIOR, tips: Iterable[float] = (), **options):
         if not (isinstance(unknown_prior, (int, float)) and 0.0 <= unknown_prior < 1.0):
             raise InputError(f"the prior of unknown must be a number in [0, 1), not {unknown_prior!r}", "unknown_prior")
         self.unknown_prior = float(unknown_prior)
@@ -236,6 +240,8 @@ class Recognizer:
         self.estimation = dict(window=window, degree=degree, curvature_method=curvature_method)
         for entry in self.models:
             self.method.prepare(entry.model)
+            for r in tips if entry.model.kind == "mesh" else ():
+                entry.model.offset(float(r)).distance_field
         if self.method.uses_engine:
             from .engine.kernels import warm
 

@@ -24,6 +24,7 @@ from .sensor import Imperfections, record
 from .surfaces.base import SurfaceModel
 
 __all__ = ["simulate_touch", "simulate_random_touch", "random_rigid_motion", "spread_vertices", "sensor_to_world",
+           "truth_pose", "truth_contact",
            "simulate_world_touch"]
 
 
@@ -160,6 +161,19 @@ def spread_vertices(model, count: int, *, rings: int = 15, rng=None) -> np.ndarr
         chosen.append(int(v))
         blocked[model.ring(int(v), rings)] = True
     return np.array(chosen, dtype=np.int64)
+
+
+def truth_pose(data: TactileData) -> tuple[np.ndarray, np.ndarray]:
+    """The data-to-model pose ``R (3, 3), t (3,)`` of a simulated touch (``model = R data + t``), from
+    its ``meta["truth"]``."""
+    truth = data.meta["truth"]
+    return np.asarray(truth["rotation"], dtype=np.float64), np.asarray(truth["translation"], dtype=np.float64)
+
+
+def truth_contact(data: TactileData) -> np.ndarray:
+    """The true contact ``(3,)`` of a simulated touch in the data's own frame."""
+    R, t = truth_pose(data)
+    return R.T @ (np.asarray(data.meta["truth"]["contact"], dtype=np.float64) - t)
 
 
 def sensor_to_world(data: TactileData, model2world) -> tuple[np.ndarray, np.ndarray]:

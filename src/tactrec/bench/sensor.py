@@ -71,12 +71,8 @@ def _touch(task) -> dict:
     except ValueError as exc:                  # no such sensor records this stroke (a tip too large for a hollow)
         return dict(row, recognized=None, refused=None, untraceable=str(exc), seconds=None)
     tip = float(SETTINGS[setting].get("tip_radius", 0.0))
-    if tip > 0:                                # as a database built with the tip stores them: not timed
-        for e in db.entries:
-            if e.model.kind == "mesh":
-                e.model.offset(tip).distance_field
-    try:
-        rec = recognizer(db.entries).recognize(touch)
+    try:                                       # a tip's offset fields prepared, as a probe's are: not timed
+        rec = recognizer(db.entries, **({"tips": (tip,)} if tip > 0 else {})).recognize(touch)
     except InputError as exc:                  # the data as recorded are not a touch the package takes
         return dict(row, recognized=None, refused=str(exc), seconds=None)
     return dict(row, recognized=rec.best, refused=None, seconds=rec.seconds, confidence=rec.confidence,
