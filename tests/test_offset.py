@@ -52,12 +52,19 @@ def test_an_offset_sphere_is_the_sphere_of_radius_plus_the_tip(sphere):
     np.testing.assert_array_equal(field.distance(np.array([[0.0, 0.0, RADIUS], [0.0, 0.0, 0.0]])), field.truncation)
 
 
-def test_the_base_field_is_the_offset_field_at_zero(sphere):
-    """The brick pre-filter keeps every brick the full sampling keeps: the field of offset 0 is the
-    model's own, array for array."""
-    built = build_field(sphere.vertices, sphere.faces, mean_edge=sphere.mean_edge, offset=0.0)
-    own = sphere.distance_field
-    for a, b in zip(built.to_store().values(), own.to_store().values()):
+@pytest.mark.parametrize("offset", [0.0, TIP])
+def test_the_brick_pre_filter_keeps_every_brick_the_full_sampling_keeps(sphere, monkeypatch, offset):
+    """The field built with the pre-filter (one unsigned query per brick's centre) is, array for array,
+    the field built by sampling every candidate brick (the pre-filter told every centre lies on the
+    surface, so it drops none)."""
+    import igl
+
+    filtered = build_field(sphere.vertices, sphere.faces, mean_edge=sphere.mean_edge, offset=offset)
+    query = igl.point_mesh_squared_distance
+    monkeypatch.setattr(igl, "point_mesh_squared_distance",
+                        lambda p, v, f: (np.full(len(p), offset ** 2),) + tuple(query(p, v, f)[1:]))
+    full = build_field(sphere.vertices, sphere.faces, mean_edge=sphere.mean_edge, offset=offset)
+    for a, b in zip(filtered.to_store().values(), full.to_store().values()):
         np.testing.assert_array_equal(a, b)
 
 
@@ -95,3 +102,33 @@ def test_a_recognizer_prepares_the_offset_fields_of_its_tips():
     with Recognizer([ModelEntry(model, CurvatureTable(model.table_samples()))], tips=(TIP,)):
         assert "distance_field" in model.offset(TIP).__dict__
         assert "distance_field" not in model.offset(1.0).__dict__
+
+
+def test_the_places_of_one_offset_never_serve_another():
+    """The same centres searched with tips of 2 and 3 and as bare points, one after the other in one
+    process (whose place cache outlives a touch): each gets the places of its own surface, as a fresh
+    cache gives them, and those of the three surfaces differ."""
+    import dataclasses
+
+    from tactrec.features import Touch
+    from tactrec.methods.fast import FastConfig
+    from tactrec.methods.fast_stages import _places
+    from tactrec.runner import _Held
+    from tactrec.sensor import Imperfections
+    from tactrec.simulation import simulate_random_touch
+
+    from test_fast import _small_meshes
+
+    entries = _small_meshes()[:1]
+    model, config = entries[0].model, FastConfig()
+    data = simulate_random_touch(model, rng=np.random.default_rng(5), points=41, spacing=0.3, angle=60.0,
+                                 imperfections=Imperfections(tip_radius=2.0))
+    shared, found = _Held(entries), []
+    for tip in (2.0, 3.0, 0.0):
+        touch = Touch.from_data(dataclasses.replace(data, tip_radius=tip))
+        seen, view, g = touch.searched(model, 1)
+        got = _places(shared, 0, seen, view, g, 1, config, True)[0]
+        alone = _places(_Held(entries), 0, seen, view, g, 1, config, True)[0]
+        np.testing.assert_array_equal(got, alone)
+        found.append(got)
+    assert not np.array_equal(found[0], found[1]) and not np.array_equal(found[0], found[2])

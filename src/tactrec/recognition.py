@@ -238,6 +238,9 @@ class Recognizer:
         self.models = list(models)
         self._by_name = {entry.name: entry for entry in self.models}
         self.estimation = dict(window=window, degree=degree, curvature_method=curvature_method)
+        tips = tuple(float(r) for r in tips)
+        if not all(np.isfinite(r) and r > 0 for r in tips):
+            raise InputError(f"a tip radius is a positive number (got {tips})", "tips")
         for entry in self.models:
             self.method.prepare(entry.model)
             for r in tips if entry.model.kind == "mesh" else ():

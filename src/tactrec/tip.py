@@ -60,9 +60,10 @@ tighter than a circular arc it fits and averaging a kink over the curve).
 Where a curve's bend is convex beyond ``-EDGE`` (``1 + r kappa <= -EDGE``,
 a radius under ``r / (1 + EDGE)``), that side is not tried; a touch with
 no side left is an :class:`~tactrec.errors.InputError` naming its file
-(:meth:`tactrec.features.Touch.with_estimate`).  The search itself
-(a) does not read the corrected estimate: a wrong edge reading costs
-nothing but the estimate reported.
+(:meth:`tactrec.features.Touch.with_estimate`).  A mesh's search of a touch
+whose curves share one tip (a) does not read the corrected estimate; the
+reported contact and spread, a closed-form surface's search, the moved
+points of a session mixing radii and the ``paper`` method do.
 
 With ``r = 0`` nothing here runs: the touch and the models are used as they
 are.

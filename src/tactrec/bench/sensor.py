@@ -104,6 +104,7 @@ def run(*, out, instances: int = 3, seed: int = 0, jobs: int | None = None, quie
         settings=tuple(SETTINGS), **_ignored) -> dict:
     """Recognise every setting's touches (of ``settings``, names of :data:`SETTINGS`, clean among
     them); write ``sensor.json`` and ``sensor.md``."""
+    settings = tuple(dict.fromkeys(("clean",) + tuple(settings)))       # clean first, each once
     out = Path(out)
     folder = out / "sensor.parts" / _code_hash()
     folder.mkdir(parents=True, exist_ok=True)

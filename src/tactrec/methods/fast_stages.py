@@ -29,11 +29,19 @@ if TYPE_CHECKING:
 
 __all__ = ["tier_span", "field_stages"]
 
+def _offset_of(model) -> float:
+    """The radius a mesh as the search sees it is offset by (0: the mesh itself): part of a cache key,
+    as a touch's centres searched with a tip have the key of the same points without one."""
+    from ..surfaces.mesh_offset import OffsetMesh
+
+    return model.radius if isinstance(model, OffsetMesh) else 0.0
+
+
 def _places(held, index: int, model, touch, g, sign: int, config: FastConfig, every: bool):
     """The places of ``model`` (the mesh of entry ``index`` as the search sees it:
     :meth:`~tactrec.features.Touch.searched`) in order for ``touch`` (the touch posed there) and
     its estimate ``g`` on side ``sign``, computed once per touch."""
-    key = (touch.key, index, sign, every)
+    key = (touch.key, index, _offset_of(model), sign, every)
     if key not in held.cache:
         if len(held.cache) > 8 * len(held.entries) + 8:           # another touch: forget the last one's
             held.cache.clear()
@@ -48,7 +56,7 @@ def _places(held, index: int, model, touch, g, sign: int, config: FastConfig, ev
 def _screen_places(held, index: int, model, touch, g, sign: int, config: FastConfig) -> np.ndarray:
     """The places the field screen takes, in order of curvature gap
     (:func:`tactrec.engine.screen.screen_places`), computed once per touch."""
-    key = (touch.key, index, sign, "screen")
+    key = (touch.key, index, _offset_of(model), sign, "screen")
     if key not in held.cache:
         chosen, _ = _places(held, index, model, touch, g, sign, config, True)
         from ..engine.screen import screen_places

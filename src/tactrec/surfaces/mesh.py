@@ -136,6 +136,11 @@ class MeshModel(SurfaceModel):
         model.__dict__["fine_curvatures"] = field
         if not all(key in arrays for key in DistanceField.KEYS):
             raise ValueError("the mesh has no stored distance field")
+        if "offset_radii" in arrays:                # a tip's offset fields (.mesh_offset.offset_arrays)
+            radii = np.asarray(arrays["offset_radii"])
+            if radii.ndim != 1 or not np.all(np.isfinite(radii) & (radii > 0)) or not all(
+                    f"offset{i}_{key}" in arrays for i in range(len(radii)) for key in DistanceField.KEYS):
+                raise ValueError("the stored offset fields are malformed")
         model._stored_field = arrays            # read when first used: a database loads in a moment
         return model
 
@@ -273,6 +278,7 @@ class MeshModel(SurfaceModel):
         from .mesh_offset import OffsetMesh
 
         key = float(radius)
+        key = next((k for k in self._offsets if np.isclose(k, key, rtol=1e-9, atol=0.0)), key)   # 0.7 x 25.4
         if key not in self._offsets:
             self._offsets[key] = OffsetMesh(self, key)
         return self._offsets[key]
