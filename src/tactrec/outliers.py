@@ -210,7 +210,8 @@ def judge_ends(touch, search, residuals, estimation: dict):
     under that search's best pose (:func:`ends_off`); the points left are searched again, that
     search's work added to the first's.  Where the judged points are too few to be a touch, or their
     search registers nothing, the touch is searched as it is (a curve under 12 points keeps under half
-    its points without its ends: then no end is judged).  The outcome's work and budget are both
+    its points without its ends: then no end is judged; where setting the ends aside leaves no touch
+    the package takes, they are kept).  The outcome's work and budget are both
     searches', and it is settled when both were."""
     from .features import Touch
 
