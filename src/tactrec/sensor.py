@@ -187,21 +187,22 @@ def record(model, frame, tangents: np.ndarray, *, spacing: float, points: int, i
     return curves, {"outlier_points": moved}
 
 
-def _pushed_out(model, centres: np.ndarray, radius: float, across: np.ndarray, iterations: int) -> np.ndarray:
+def _pushed_out(model, centres: np.ndarray, radius: float, across: np.ndarray,
+                iterations: int) -> tuple[np.ndarray, np.ndarray]:
     """``centres (n, 3)`` moved within the plane of normal ``across (3,)`` (unit), each along its closest
     point's normal as that plane holds it, until each is at ``radius`` from the surface (within 1e-9
-    of it, or after ``iterations`` moves)."""
+    of it, or after ``iterations`` moves); and how far each then is from that ``(n,)``."""
     offset = Offset(model, radius)                   # exact distances (a closed form's to its foot points)
-    for _ in range(iterations):
+    for k in range(iterations + 1):
         d, n = offset.planes(centres)
         short = -np.asarray(d, dtype=np.float64)
-        if not np.any(np.abs(short) > 1e-9 * max(radius, 1.0)):
+        if k == iterations or not np.any(np.abs(short) > 1e-9 * max(radius, 1.0)):
             break
         u = np.asarray(n, dtype=np.float64)
         u = u - np.sum(u * across[None], axis=1)[:, None] * across[None]       # element-wise: no BLAS
         held = np.sum(u * u, axis=1)                     # how much of the distance a move along u changes
         centres = centres + np.where(held > 1e-6, short / np.maximum(held, 1e-6), 0.0)[:, None] * u
-    return centres
+    return centres, np.abs(short)
 
 
 def _arc_length(x: np.ndarray) -> np.ndarray:
@@ -229,7 +230,7 @@ def tip_centres(model, points: np.ndarray, radius: float, *, across: np.ndarray 
         along = np.linalg.svd(x - x.mean(axis=0))[2][0]
         across = np.cross(along, np.asarray(model.planes(x[len(x) // 2][None])[1], dtype=np.float64)[0])
     across = np.asarray(across, dtype=np.float64) / np.linalg.norm(across)
-    centres = _pushed_out(model, x, radius, across, iterations)
+    centres, _ = _pushed_out(model, x, radius, across, iterations)
     steps = np.linalg.norm(np.diff(x, axis=0), axis=1)
     piece = float(steps[steps > 0].min(initial=np.inf)) / 8.0
     if not np.isfinite(piece):
@@ -240,14 +241,13 @@ def tip_centres(model, points: np.ndarray, radius: float, *, across: np.ndarray 
         w = (np.arange(1, k + 1) / k)[:, None]
         filled.append(centres[i] + w * (centres[i + 1] - centres[i]))
     start = np.concatenate([[0], np.cumsum(cuts)])                    # where each centre lies in the fill
-    dense = _pushed_out(model, np.concatenate(filled), radius, across, iterations)
+    dense, _ = _pushed_out(model, np.concatenate(filled), radius, across, iterations)
     s = _arc_length(dense)
     k = len(x) // 2 if anchor is None else int(np.argmin(np.linalg.norm(x - anchor, axis=1)))
     want = s[start[k]] + (_arc_length(x) - _arc_length(x)[k])
     inside = (want >= s[0]) & (want <= s[-1])
-    out = _pushed_out(model, np.stack([np.interp(want[inside], s, dense[:, j]) for j in range(3)], axis=1),
-                      radius, across, iterations)
-    gap = np.abs(np.asarray(Offset(model, radius).planes(out)[0], dtype=np.float64))
+    out, gap = _pushed_out(model, np.stack([np.interp(want[inside], s, dense[:, j]) for j in range(3)], axis=1),
+                           radius, across, iterations)
     if np.any(gap > 1e-6 * max(radius, 1.0)):
         raise ValueError(f"a tip of radius {radius:g} cannot follow this stroke in its plane (a hollow too "
                          "narrow for it)")
