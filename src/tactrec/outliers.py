@@ -56,7 +56,11 @@ the tilted pose lies.)  An end point is off when its distance to the model
 under that pose exceeds ``k`` times the touch's noise sigma (third
 differences of the points kept) -- the same ``k``: Gaussian noise passes
 it with probability below :data:`ALPHA` -- and :data:`FLOOR` steps; it is
-set aside too, and the points left are searched (:func:`judge_ends`).
+set aside too, and the judged search's registrations, every model's, are
+refined from their poses on the points left (:func:`judge_ends`): those
+points are the judged ones and the good ends, which the poses already fit,
+so a few steps carry each pose over, at a small part of a second search's
+cost.
 Where the judged points leave that pose free along a direction that only
 the ends hold (the judged points on a box's two faces, an end on the
 third), good end points may be set aside with the bad: they cost the fit
@@ -200,19 +204,20 @@ def ends_off(curves, residuals: np.ndarray, noise: float, step: float) -> list[n
     return [end & (np.abs(residuals[a:b]) > limit) for end, a, b in zip(ends(sizes), bounds[:-1], bounds[1:])]
 
 
-def judge_ends(touch, search, residuals, estimation: dict):
+def judge_ends(touch, search, refit, residuals, estimation: dict):
     """The touch (a :class:`~tactrec.features.Touch` with outliers) without the curves' end points off
     the registration (module text), and the search's outcome on it: ``search(touch)`` the method's
-    search, ``residuals(registration, touch)`` the signed distances of the touch's points under a
-    registration's pose, ``estimation`` the keywords of :meth:`~tactrec.features.Touch.from_data`.
+    search, ``refit(outcome, touch)`` the method's refit of a search's registrations on a touch of
+    nearly the same points (:meth:`~tactrec.methods.base.Method.refit`), ``residuals(registration,
+    touch)`` the signed distances of the touch's points under a registration's pose, ``estimation``
+    the keywords of :meth:`~tactrec.features.Touch.from_data`.
 
-    The judged points alone (each curve without its ends) are searched first; the ends are judged
-    under that search's best pose (:func:`ends_off`); the points left are searched again, that
-    search's work added to the first's.  Where the judged points are too few to be a touch, or their
-    search registers nothing, the touch is searched as it is (a curve under 12 points keeps under half
-    its points without its ends: then no end is judged; where setting the ends aside leaves no touch
-    the package takes, they are kept).  The outcome's work and budget are both
-    searches', and it is settled when both were."""
+    The judged points alone (each curve without its ends) are searched; the ends are judged under that
+    search's best pose (:func:`ends_off`); its registrations are refitted on the points left, the
+    work of both added.  Where the judged points are too few to be a touch, or their search registers
+    nothing, the touch is searched as it is (a curve under 12 points keeps under half its points
+    without its ends: then no end is judged; where setting the ends aside leaves no touch the package
+    takes, they are kept)."""
     from .features import Touch
 
     sizes = [len(c) for c in touch.data.curves]
@@ -232,9 +237,9 @@ def judge_ends(touch, search, residuals, estimation: dict):
         try:
             again = Touch.from_data(without(touch.data, marks, touch.outliers + off), **estimation)
         except InputError:                     # the ends are what makes it a touch: they are kept
-            return touch, _both(first, search(touch))
+            return touch, refit(first, touch)
         touch = dataclasses.replace(again, outliers=touch.outliers + off + again.outliers)
-    return touch, _both(first, search(touch))
+    return touch, refit(first, touch)
 
 
 def _both(first, found):

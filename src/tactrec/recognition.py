@@ -286,7 +286,7 @@ class Recognizer:
         ``among``: the names of the models to search (None: all); the others are rejected as not
         searched.  ``budget``: the most work (closest-point queries) the search may spend in all, when
         lower than the method's own budget; the first round runs whatever it costs (a touch with outliers
-        is searched twice, each search within it: :func:`tactrec.outliers.judge_ends`).  ``context_tips``:
+        is searched within it without its curves' ends, then refitted: :func:`tactrec.outliers.judge_ends`).  ``context_tips``:
         the tip radius of each context curve and ``context_surface`` the curves moved onto the surface
         (:mod:`tactrec.tip`; None: no tip)."""
         start = time.perf_counter()
@@ -303,8 +303,10 @@ class Recognizer:
 
         def search(t):
             return self.method.search(t, self.models, self.config, self.runner, among=chosen, budget=budget)
+        def refit(outcome, t):
+            return self.method.refit(t, self.models, self.config, self.runner, outcome)
         if touch.outliers and not len(context):         # a slipping sensor: its curves' ends judged by the fit
-            touch, outcome = judge_ends(touch, search, self._residuals, self.estimation)
+            touch, outcome = judge_ends(touch, search, refit, self._residuals, self.estimation)
         else:
             outcome = search(touch)
         ranking = sorted(outcome.ranking, key=_rank_key)

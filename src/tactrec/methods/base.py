@@ -10,7 +10,9 @@ results, through these hooks:
   the worker processes);
 * :meth:`Method.search` -- the registrations, given a :class:`Runner` that
   runs a stage over the models in worker processes or in this one (on all
-  models, or on a chosen few: ``among``).
+  models, or on a chosen few: ``among``);
+* :meth:`Method.refit` -- a search's registrations carried over to nearly the same touch (a few of
+  its points set aside or taken back: :func:`tactrec.outliers.judge_ends`).
 
 A new method is its own module and one line in :data:`tactrec.methods.METHODS`.
 """
@@ -106,4 +108,10 @@ class Method(Protocol):
         """One registration per model of ``models``; only those at the indices ``among`` are searched
         (all when None), the others are rejected as not searched.  ``budget``: at most this much work
         in all, when lower than the method's own budget (a method without a budget ignores it)."""
+        ...
+
+    def refit(self, touch, models: Sequence, config: Config, runner: Runner,
+              outcome: SearchOutcome) -> SearchOutcome:
+        """``outcome``, the search of a touch of nearly the same points, on ``touch``: one registration per
+        model, in the models' order, each error measured on ``touch``'s points; the work of both."""
         ...

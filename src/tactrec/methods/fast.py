@@ -85,7 +85,7 @@ from ..registration import closedform_fast, mesh_fast
 from ..registration.result import Registration
 from .base import NOT_SEARCHED, Config, SearchOutcome
 from .common import in_model_units
-from .fast_stages import _cheap, _closed_form, _polished, _refined, field_stages, tier_span
+from .fast_stages import _cheap, _closed_form, _polished, _refined, _refitted, field_stages, tier_span
 
 __all__ = ["FastMethod", "FastConfig", "Tier", "TIERS", "tier_cost", "tier_places"]
 
@@ -347,6 +347,17 @@ class FastMethod:
         for i, found in zip(top, runner.map(_polished, top, touch, config, items=[state.best[i] for i in top])):
             state.best[i], work = found["registration"], work + found["queries"]
         return SearchOutcome(self._ranking(state, models), settled, int(work), depth, int(allowed))
+
+    def refit(self, touch, models, config: FastConfig, runner, outcome: SearchOutcome) -> SearchOutcome:
+        """``outcome``, a search of nearly the same points as ``touch`` (a few set aside or taken back),
+        on ``touch``: each model's registration refined from its pose on the touch's points
+        (``polish_iterations`` exact steps), the models rejected or deferred left so; its work added."""
+        ranking = list(outcome.ranking)
+        ok = [i for i, r in enumerate(ranking) if r.ok]
+        work = 0
+        for i, found in zip(ok, runner.map(_refitted, ok, touch, config, items=[ranking[i] for i in ok])):
+            ranking[i], work = found["registration"], work + found["queries"]
+        return dataclasses.replace(outcome, ranking=ranking, work=int(outcome.work + work))
 
     @staticmethod
     def _tier(state: _State, group: list[int], k: int, runner) -> int:

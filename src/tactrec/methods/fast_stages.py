@@ -1,7 +1,8 @@
 """Method ``fast``'s stages, run per model in worker processes (see :mod:`tactrec.methods.fast`).
 
 Step 1, the cheap stage (:func:`_cheap`); step 3, refinement (:func:`_refined`); the final polish
-(:func:`_polished`); and closed-form surfaces (:func:`_closed_form`).
+(:func:`_polished`); closed-form surfaces (:func:`_closed_form`); and a search's registrations
+refitted on a touch of nearly the same points (:func:`_refitted`).
 
 A touch with a round tip follows the one rule of :mod:`tactrec.tip`: the places, the field screen,
 its field steps and local grid take the mesh and the touch as the search sees them
@@ -21,7 +22,7 @@ from ..engine import LOOKUP_COST
 from ..linalg import stable_order
 from ..registration import closedform_fast, mesh_fast
 from ..registration.result import Registration
-from ..registration.solver import Criteria, solve
+from ..registration.solver import Criteria, mean_distance, solve
 from .common import best_of_orientations, in_model_units
 
 if TYPE_CHECKING:
@@ -225,6 +226,32 @@ def _polished(held, indices, touch, config: FastConfig, registrations: list[Regi
                                          normal_sign=r.normal_sign, scale=r.scale)
             q = config.polish_iterations * len(t.joint_points)
         out.append({"registration": better, "queries": q})
+    return out
+
+
+def _refitted(held, indices, touch, config: FastConfig, registrations: list[Registration]) -> list[dict]:
+    """The registrations of a search of nearly the same points (the same touch, a few of its points set
+    aside or taken back) refined on this touch's points, from their poses: ``polish_iterations`` exact
+    steps.  Their errors are this touch's, whether or not the steps lower them."""
+    out = []
+    for index, r in zip(indices, registrations):
+        model = held.entries[index].model
+        t = in_model_units(touch, model)
+        exact = t.exact(model)
+        if model.kind == "mesh":
+            R, tr, error, q = solve(exact, r.rotation[None], r.translation[None], t.joint_points,
+                                    Criteria(config.polish_iterations, tolerance=config.tolerance,
+                                             history=config.history))
+            found = _registration(model, t, R[0], tr[0], error[0], r.normal_sign)
+        else:
+            here = float(mean_distance(exact, r.rotation[None], r.translation[None], t.joint_points)[0])
+            found = dataclasses.replace(closedform_fast.polish(model, dataclasses.replace(r, error=here),
+                                                               t.oriented(r.normal_sign), t.joint_points,
+                                                               exact=exact),
+                                        normal_sign=r.normal_sign, scale=r.scale)
+            q = (config.polish_iterations + 1) * len(t.joint_points)
+        out.append({"registration": dataclasses.replace(found, alternatives=r.alternatives, candidates=r.candidates),
+                    "queries": q})
     return out
 
 

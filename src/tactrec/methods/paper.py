@@ -127,3 +127,10 @@ class PaperMethod:
         found = dict(zip(chosen, runner.map(_stage, chosen, touch, config)))
         return SearchOutcome([found[i] if i in found else Registration.rejection(e.name, NOT_SEARCHED)
                               for i, e in enumerate(models)])
+
+    def refit(self, touch, models, config: PaperConfig, runner, outcome: SearchOutcome) -> SearchOutcome:
+        """The paper's registration has no step that starts from a given pose: ``touch`` is searched
+        in full again, on the models ``outcome`` searched, its work added."""
+        among = [i for i, r in enumerate(outcome.ranking) if r.rejected != NOT_SEARCHED]
+        again = self.search(touch, models, config, runner, among=among)
+        return dataclasses.replace(again, work=again.work + outcome.work)
