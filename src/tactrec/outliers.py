@@ -60,7 +60,9 @@ set aside too, and the judged search's registrations, every model's, are
 refined from their poses on the points left (:func:`judge_ends`): those
 points are the judged ones and the good ends, which the poses already fit,
 so a few steps carry each pose over, at a small part of a second search's
-cost.
+cost.  A judged search that did not settle (its budget ran out before a
+fit) has no registrations to carry over: the points left are searched
+again.
 Where the judged points leave that pose free along a direction that only
 the ends hold (the judged points on a box's two faces, an end on the
 third), good end points may be set aside with the bad: they cost the fit
@@ -213,8 +215,8 @@ def judge_ends(touch, search, refit, residuals, estimation: dict):
     the keywords of :meth:`~tactrec.features.Touch.from_data`.
 
     The judged points alone (each curve without its ends) are searched; the ends are judged under that
-    search's best pose (:func:`ends_off`); its registrations are refitted on the points left, the
-    work of both added.  Where the judged points are too few to be a touch, or their search registers
+    search's best pose (:func:`ends_off`); its registrations are refitted on the points left where it
+    settled, and the points left searched again where it did not, the work of both added.  Where the judged points are too few to be a touch, or their search registers
     nothing, the touch is searched as it is (a curve under 12 points keeps under half its points
     without its ends: then no end is judged; where setting the ends aside leaves no touch the package
     takes, they are kept)."""
@@ -237,9 +239,16 @@ def judge_ends(touch, search, refit, residuals, estimation: dict):
         try:
             again = Touch.from_data(without(touch.data, marks, touch.outliers + off), **estimation)
         except InputError:                     # the ends are what makes it a touch: they are kept
-            return touch, refit(first, touch)
+            return touch, _carried(first, touch, search, refit)
         touch = dataclasses.replace(again, outliers=touch.outliers + off + again.outliers)
-    return touch, refit(first, touch)
+    return touch, _carried(first, touch, search, refit)
+
+
+def _carried(first, touch, search, refit):
+    """The outcome of ``first``, the judged points' search, on ``touch``: refitted where it settled (its
+    best is a fit, or clear of every other model), searched again where it did not (its registrations
+    are then no more than where its budget stopped)."""
+    return refit(first, touch) if first.settled else _both(first, search(touch))
 
 
 def _both(first, found):
