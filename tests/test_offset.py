@@ -50,6 +50,13 @@ def test_an_offset_sphere_is_the_sphere_of_radius_plus_the_tip(sphere):
     assert np.median(error) < 0.05 and np.max(error) < 0.15
     # far from the offset surface (on the mesh itself, or the centre) the field is its truncation
     np.testing.assert_array_equal(field.distance(np.array([[0.0, 0.0, RADIUS], [0.0, 0.0, 0.0]])), field.truncation)
+    # its exact distances and planes are the offset's: the mesh's minus the tip, along the mesh's planes
+    sd, n = view.planes(p)
+    own_sd, own_n = sphere.planes(p)
+    np.testing.assert_allclose(sd, own_sd - TIP)
+    np.testing.assert_allclose(n, own_n)
+    np.testing.assert_allclose(view.distance(p), np.abs(own_sd - TIP))
+    assert np.median(np.abs(sd - d)) < 0.05
 
 
 @pytest.mark.parametrize("offset", [0.0, TIP])

@@ -20,8 +20,9 @@ not know.  :class:`OffsetMesh` is what the search reads of a mesh, offset:
   (:func:`offset_arrays`, ``tactrec build --tip-radius``); else it is built
   on first use (seconds for a scan) and kept with the model.
 
-Everything else (the triangles, exact closest points, the name) is the
-model's: exact distances against the offset are :class:`tactrec.tip.Offset`'s.
+It is an :class:`~tactrec.surfaces.offset.Offset`: its exact distances and
+planes are the model's minus ``r``; everything else (the triangles, exact
+closest points, the name) is the model's.
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ import numpy as np
 
 from .mesh_curvature import CurvatureField
 from .mesh_field import DistanceField, build_field
+from .offset import Offset
 
 __all__ = ["OffsetMesh", "offset_curvature", "offset_arrays", "stored_offset_field"]
 
@@ -45,17 +47,12 @@ def offset_curvature(k: np.ndarray, r: float) -> np.ndarray:
         return np.where(den > 0, k / np.where(den > 0, den, 1.0), np.inf)
 
 
-class OffsetMesh:
-    """The mesh ``model`` offset outward by ``radius`` (module text); other attributes are the model's."""
+class OffsetMesh(Offset):
+    """The mesh ``model`` offset outward by ``radius`` (module text): an :class:`Offset` of one radius
+    whose places, curvatures and distance field are the offset's too."""
 
     def __init__(self, model, radius: float):
-        self.model = model
-        self.radius = float(radius)
-
-    def __getattr__(self, name):
-        if name == "model":                       # not yet set (a copy being made): no recursion
-            raise AttributeError(name)
-        return getattr(self.model, name)
+        super().__init__(model, float(radius))
 
     @cached_property
     def vertices(self) -> np.ndarray:
