@@ -210,3 +210,37 @@ def test_a_search_refitted_on_nearly_the_same_points_fits_them_as_a_search_does(
             best = min(r.error / r.scale for r in full.ranking if r.ok)
             right += got.model == entry.name and got.error / got.scale <= 1.5 * best
     assert right >= 19, right
+
+
+def test_one_sided_and_short_curves_keep_the_ends_they_cannot_lose(small):
+    """``judged_ends``: a curve that ends at the meeting point has its far end judged, not that one; a
+    curve of 11 points (under half left without both ends) has none judged, one of 12 both.  Then 20
+    seeded touches with 3% outliers whose curves each start or end at the contact (noise 0.01 mm):
+    each curve keeps its point at the contact, and the right model wins with the contact within 0.05
+    mm of the truth in 17 or more."""
+    from tactrec.outliers import ENDS, judged_ends
+    from tactrec.simulation import truth_contact
+
+    line = np.c_[np.arange(12.0), np.zeros(12), np.zeros(12)]
+    first, last = judged_ends([line], line[0])[0], judged_ends([line], line[-1])[0]
+    assert not first[:ENDS].any() and first[-ENDS:].all() and first.sum() == ENDS
+    assert last[:ENDS].all() and not last[-ENDS:].any() and last.sum() == ENDS
+    assert judged_ends([line], line[5])[0].sum() == 2 * ENDS
+    assert not judged_ends([line[:11]], line[5])[0].any()
+    right = 0
+    with Recognizer(small) as recognizer:
+        for k in range(20):
+            entry = small[k % len(small)]
+            data = _touch(entry.model, 12, k, outliers=0.03, noise=0.01)
+            rng = np.random.default_rng([12, k])
+            middle = len(data.curves[0]) // 2
+            halves = tuple(np.asarray(c)[middle:] if rng.random() < 0.5 else np.asarray(c)[:middle + 1]
+                           for c in data.curves)
+            result = recognizer.recognize(dataclasses.replace(data, curves=halves))
+            kept = result.touch.points
+            for full in data.curves:
+                at = np.asarray(full)[middle]
+                assert np.min(np.linalg.norm(kept - at, axis=1)) == 0, k
+            near = np.linalg.norm(result.estimate.contact - truth_contact(data)) < 0.05
+            right += result.best == entry.name and near
+    assert right >= 17, right

@@ -62,7 +62,11 @@ points are the judged ones and the good ends, which the poses already fit,
 so a few steps carry each pose over, at a small part of a second search's
 cost.  A judged search that did not settle (its budget ran out before a
 fit) has no registrations to carry over: the points left are searched
-again.
+again.  Two ends are not judged (:func:`judged_ends`): the end a one-sided
+curve meets the others at (set aside, it would take the contact from the
+judged points' estimate), and both ends of a curve too short to lose them
+(under 12 points: it would keep under half).
+
 Where the judged points leave that pose free along a direction that only
 the ends hold (the judged points on a box's two faces, an end on the
 third), good end points may be set aside with the bad: they cost the fit
@@ -86,10 +90,11 @@ import dataclasses
 import numpy as np
 
 from .errors import InputError
+from .io.meeting import meeting
 from .io.touch import MIN_POINTS, TactileData
 
 __all__ = ["ALPHA", "FLOOR", "ENDS", "spike_residuals", "bound", "flagged", "kept", "ends", "ends_off", "without",
-           "judge_ends"]
+           "judged_ends", "judge_ends"]
 
 #: the chance that Gaussian noise sets any point of a touch aside
 ALPHA = 1e-6
@@ -195,15 +200,35 @@ def ends(sizes) -> list[np.ndarray]:
     return marks
 
 
-def ends_off(curves, residuals: np.ndarray, noise: float, step: float) -> list[np.ndarray]:
-    """Per curve of ``curves`` (``(n_i, 3)`` each), which of its :data:`ENDS` points at either end lie off
-    the registered model (module text): ``residuals (sum n_i,)`` their signed distances under the pose
-    of the judged points, ``noise`` the touch's sigma and ``step`` its median step between points."""
+def judged_ends(curves, contact: np.ndarray) -> list[np.ndarray]:
+    """Per curve of ``curves`` (``(n_i, 3)`` each), which of the :data:`ENDS` points at either end the fit
+    judges ``(n_i,)`` bool: each such end, except the end the meeting point ``contact (3,)`` lies at (a
+    one-sided curve's: set aside, it would take the contact from the judged points' estimate), and
+    no end of a curve that would keep fewer than :data:`~tactrec.io.touch.MIN_POINTS` or half its
+    points without both (its ends are kept unjudged)."""
+    marks = []
+    for c in curves:
+        c = np.asarray(c, dtype=np.float64)
+        n = len(c)
+        end = np.zeros(n, dtype=bool)
+        if n - 2 * ENDS >= max(MIN_POINTS, n / 2):
+            at = int(np.argmin(np.sum((c - contact) ** 2, axis=1)))
+            end[:ENDS], end[n - ENDS:] = at >= ENDS, at < n - ENDS
+        marks.append(end)
+    return marks
+
+
+def ends_off(curves, residuals: np.ndarray, noise: float, step: float, judged=None) -> list[np.ndarray]:
+    """Per curve of ``curves`` (``(n_i, 3)`` each), which of its judged end points (``judged``, per curve
+    ``(n_i,)`` bool; None: the :data:`ENDS` at either end) lie off the registered model (module text):
+    ``residuals (sum n_i,)`` their signed distances under the pose of the judged points, ``noise`` the
+    touch's sigma and ``step`` its median step between points."""
     sizes = [len(c) for c in curves]
     k = np.sqrt(2.0 * np.log(max(sum(sizes), 1) / ALPHA))
     limit = max(k * noise, FLOOR * step)
     bounds = np.cumsum([0] + sizes)
-    return [end & (np.abs(residuals[a:b]) > limit) for end, a, b in zip(ends(sizes), bounds[:-1], bounds[1:])]
+    judged = ends(sizes) if judged is None else judged
+    return [end & (np.abs(residuals[a:b]) > limit) for end, a, b in zip(judged, bounds[:-1], bounds[1:])]
 
 
 def judge_ends(touch, search, refit, residuals, estimation: dict):
@@ -214,26 +239,27 @@ def judge_ends(touch, search, refit, residuals, estimation: dict):
     touch)`` the signed distances of the touch's points under a registration's pose, ``estimation``
     the keywords of :meth:`~tactrec.features.Touch.from_data`.
 
-    The judged points alone (each curve without its ends) are searched; the ends are judged under that
-    search's best pose (:func:`ends_off`); its registrations are refitted on the points left where it
-    settled, and the points left searched again where it did not, the work of both added.  Where the judged points are too few to be a touch, or their search registers
-    nothing, the touch is searched as it is (a curve under 12 points keeps under half its points
-    without its ends: then no end is judged; where setting the ends aside leaves no touch the package
-    takes, they are kept)."""
+    The judged points alone (each curve without its judged ends, :func:`judged_ends`) are searched;
+    the ends are judged under that search's best pose (:func:`ends_off`); its registrations are
+    refitted on the points left where it settled, and the points left searched again where it did
+    not, the work of both added.  Where no end can be judged, the judged points are too few to be a
+    touch, or their search registers nothing, the touch is searched as it is; where setting the ends
+    aside leaves no touch the package takes, they are kept."""
     from .features import Touch
 
-    sizes = [len(c) for c in touch.data.curves]
-    inner_marks = ends(sizes)
+    judged = judged_ends(touch.data.curves, meeting(touch.data)[0])
+    count = int(sum(int(m.sum()) for m in judged))
+    if not count:
+        return touch, search(touch)
     try:
-        inner = Touch.from_data(without(touch.data, inner_marks, int(sum(int(m.sum()) for m in inner_marks))),
-                                **estimation)
+        inner = Touch.from_data(without(touch.data, judged, count), **estimation)
     except InputError:
         return touch, search(touch)
     first = search(inner)
     best = min((r for r in first.ranking if r.ok), key=lambda r: (r.error / r.scale, r.model), default=None)
     if best is None:
         return touch, _both(first, search(touch))
-    marks = ends_off(touch.curves, residuals(best, touch), touch.noise, touch.data.spacing)
+    marks = ends_off(touch.curves, residuals(best, touch), touch.noise, touch.data.spacing, judged)
     off = int(sum(int(m.sum()) for m in marks))
     if off:
         try:
