@@ -108,3 +108,41 @@ def test_four_to_six_curves(small, curves):
             right += result.best == entry.name
             assert len(json.loads(json.dumps(result.to_json()))["contact"]) == 3
     assert right >= 11
+
+
+def _u_curve(direction: np.ndarray, shift: float, depth: float = 3.0) -> np.ndarray:
+    """A section of a 3 mm plate through the origin along ``direction`` (in the x-y plane), moved
+    ``shift`` across it: along the top face (z = 0) to 10 mm, round the plate's edge and back along
+    the bottom face (z = -depth), 0.3 mm steps."""
+    across = np.array([-direction[1], direction[0], 0.0])
+    s = np.arange(-6.0, 10.0 + 1e-9, 0.3)
+    top = s[:, None] * direction + shift * across
+    down = 10.0 * direction + shift * across + np.linspace(0, -depth, 11)[1:-1, None] * np.array([0, 0, 1.0])
+    bottom = s[::-1, None] * direction + shift * across + np.array([0.0, 0.0, -depth])
+    return np.concatenate([top, down, bottom])
+
+
+def test_every_point_the_curves_meet_at_is_found():
+    """Three sections of a plate, 60 degrees apart, that meet on its top face and again on its bottom
+    face 3 mm below: ``meeting_points`` finds both, :func:`find_contact`'s first.  Where the strokes
+    on the top face miss each other by 0.2 mm and the bottom ones do not (a far meeting closer than
+    the one traced), both are still found, so a recognition can try the traced one."""
+    from tactrec.io.meeting import find_contact, meeting_points
+
+    dirs = [np.array([np.cos(a), np.sin(a), 0.0]) for a in np.deg2rad([0.0, 60.0, 120.0])]
+    exact = [_u_curve(d, 0.0) for d in dirs]
+    points = meeting_points(exact, MEETING * 0.3)
+    assert len(points) == 2
+    np.testing.assert_allclose(points[0], find_contact(exact))
+    assert sorted(round(float(p[2]), 6) for p in points) == [-3.0, 0.0]
+    for p in points:
+        assert np.hypot(p[0], p[1]) < 1e-9
+    missed = []
+    for d, shift in zip(dirs, (0.2, 0.2, 0.2)):
+        c = _u_curve(d, 0.0)
+        top = c[:, 2] > -1.5
+        c[top] += shift * np.array([-d[1], d[0], 0.0])
+        missed.append(c)
+    points = meeting_points(missed, MEETING * 0.3)
+    assert len(points) == 2 and abs(points[0][2] + 3.0) < 1e-6       # the far, exact meeting first
+    assert abs(points[1][2]) < 1e-6 and np.hypot(points[1][0], points[1][1]) < 0.3

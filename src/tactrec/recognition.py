@@ -22,7 +22,7 @@ import numpy as np
 from .errors import InputError
 from .estimation import LocalGeometry
 from .features import Touch
-from .io.meeting import meeting
+from .io.meeting import MEETING, meeting, meeting_points
 from .io.touch import TactileData
 from .methods import DEFAULT_METHOD, get_method
 from .outliers import judge_ends
@@ -196,6 +196,11 @@ FLOOR = 1e-3
 LOCATED = 10.0
 
 
+def _best_error(outcome) -> float:
+    """The least error of an outcome's accepted registrations, data units (inf for none)."""
+    return min((r.error / r.scale for r in outcome.ranking if r.ok), default=np.inf)
+
+
 def _rank_key(r: Registration):
     """Accepted models first, by error in the data's units (models may differ in units)."""
     return (not r.ok, r.error / r.scale if r.ok else 0.0, r.model)
@@ -288,12 +293,14 @@ class Recognizer:
         lower than the method's own budget; the first round runs whatever it costs (a touch with outliers
         is searched within it without its curves' ends, then refitted: :func:`tactrec.outliers.judge_ends`).  ``context_tips``:
         the tip radius of each context curve and ``context_surface`` the curves moved onto the surface
-        (:mod:`tactrec.tip`; None: no tip)."""
+        (:mod:`tactrec.tip`; None: no tip).
+
+        Where the data give no ``contact``, the curves' meeting point is :func:`~tactrec.io.meeting.find_contact`'s.
+        Curves may meet at more than one point within the tolerance (:func:`~tactrec.io.meeting.meeting_points`:
+        the far face of a thin plate); where the search from the first finds no fit, each other is
+        searched in turn, the best error kept, until one fits or ``budget`` is spent."""
         start = time.perf_counter()
         _check_scale(data, self.models)
-        touch = Touch.from_data(data, **self.estimation)
-        if len(context):
-            touch = touch.with_context(context, fit=fit, tips=context_tips, surface=context_surface)
         chosen = None
         if among is not None:
             unknown = sorted(set(among) - set(self._by_name))
@@ -301,14 +308,35 @@ class Recognizer:
                 raise InputError(f"no model named {unknown[0]!r} among the recognizer's", "among")
             chosen = [i for i, entry in enumerate(self.models) if entry.name in set(among)]
 
-        def search(t):
-            return self.method.search(t, self.models, self.config, self.runner, among=chosen, budget=budget)
         def refit(outcome, t):
             return self.method.refit(t, self.models, self.config, self.runner, outcome)
-        if touch.outliers and not len(context):         # a slipping sensor: its curves' ends judged by the fit
-            touch, outcome = judge_ends(touch, search, refit, self._residuals, self.estimation)
-        else:
-            outcome = search(touch)
+
+        def searched(d, left):
+            def search(t):
+                return self.method.search(t, self.models, self.config, self.runner, among=chosen, budget=left)
+            touch = Touch.from_data(d, **self.estimation)
+            if len(context):
+                touch = touch.with_context(context, fit=fit, tips=context_tips, surface=context_surface)
+            if touch.outliers and not len(context):     # a slipping sensor: its curves' ends judged by the fit
+                return judge_ends(touch, search, refit, self._residuals, self.estimation)
+            return touch, search(touch)
+
+        touch, outcome = searched(data, budget)
+        if data.contact is None and not self._fits(touch, outcome):
+            # the curves may meet elsewhere too (a thin plate's far face): each meeting point, closest
+            # first, is tried until one's best fits
+            for contact in meeting_points(touch.data.curves, MEETING * touch.data.spacing)[1:]:
+                left = None if budget is None else budget - outcome.work
+                if left is not None and left <= 0:
+                    break
+                other, found = searched(dataclasses.replace(data, contact=contact), left)
+                work = outcome.work + found.work
+                allowed = None if outcome.allowed is None or found.allowed is None else outcome.allowed + found.allowed
+                if _best_error(found) < _best_error(outcome):
+                    touch, outcome = other, found
+                outcome = dataclasses.replace(outcome, work=work, allowed=allowed)
+                if self._fits(touch, outcome):
+                    break
         ranking = sorted(outcome.ranking, key=_rank_key)
         best = ranking[0].model if ranking and ranking[0].ok else None
         ok = [r for r in ranking if r.ok]
@@ -320,6 +348,10 @@ class Recognizer:
         out.probabilities                        # the probabilities are part of the recognition and of its seconds
         object.__setattr__(out, "seconds", time.perf_counter() - start)          # set once, before anyone sees it
         return out
+
+    def _fits(self, touch: Touch, outcome) -> bool:
+        """Whether the best registration of ``outcome`` fits ``touch`` (within its fit limit)."""
+        return _best_error(outcome) <= max(fit_limit(touch, self.floor), touch.fit)
 
     @property
     def floor(self) -> float:

@@ -11,7 +11,7 @@ import numpy as np
 
 from ..errors import InputError
 
-__all__ = ["closest_on_polyline", "find_contact", "meeting", "check_meeting", "MEETING"]
+__all__ = ["closest_on_polyline", "find_contact", "meeting_points", "meeting", "check_meeting", "MEETING"]
 
 
 def closest_on_polyline(points: np.ndarray, line: np.ndarray) -> np.ndarray:
@@ -33,15 +33,27 @@ def find_contact(curves) -> np.ndarray:
     """
     curves = [np.asarray(c, dtype=np.float64) for c in curves]
     best, best_cost = None, np.inf
+    for c, cost in zip(curves, _costs(curves)):
+        k = int(np.argmin(cost))
+        if cost[k] < best_cost:
+            best, best_cost = c[k], cost[k]
+    return _settled(best.copy(), curves)
+
+
+def _costs(curves) -> list[np.ndarray]:
+    """Per curve, each point's summed squared distance to the other curves ``(n_i,)``."""
+    out = []
     for i, c in enumerate(curves):
         cost = np.zeros(len(c))
         for j, other in enumerate(curves):
             if j != i:
                 cost += np.sum((closest_on_polyline(c, other) - c) ** 2, axis=1)
-        k = int(np.argmin(cost))
-        if cost[k] < best_cost:
-            best, best_cost = c[k], cost[k]
-    x = best.copy()
+        out.append(cost)
+    return out
+
+
+def _settled(x: np.ndarray, curves) -> np.ndarray:
+    """From ``x (3,)``, projections onto the curves averaged until the point settles."""
     for _ in range(50):
         proj = np.array([closest_on_polyline(x[None], c)[0] for c in curves])
         new = proj.mean(axis=0)
@@ -50,6 +62,33 @@ def find_contact(curves) -> np.ndarray:
             break
         x = new
     return x
+
+
+def meeting_points(curves, tolerance: float) -> list[np.ndarray]:
+    """Every point ``(3,)`` the curves meet at, each curve passing within ``tolerance`` of it: from each
+    local minimum, along a curve, of its points' summed squared distances to the other curves, the
+    point settled as :func:`find_contact` settles its start; one per ``2 tolerance``, :func:`find_contact`'s
+    first, then by the largest distance of a curve from them.
+
+    Curves that pass near each other meet where they were traced, and also wherever their planes'
+    common lines pierce the surface again within their length (the far face of a thin plate, a few
+    millimetres off): where the traces miss each other by a little, such a far meeting can be the
+    closer one."""
+    curves = [np.asarray(c, dtype=np.float64) for c in curves]
+    found = [find_contact(curves)]
+    others = []
+    limit = (len(curves) - 1) * tolerance ** 2
+    for c, cost in zip(curves, _costs(curves)):
+        low = np.r_[True, cost[1:] <= cost[:-1]] & np.r_[cost[:-1] <= cost[1:], True] & (cost <= limit)
+        for k in np.flatnonzero(low):
+            seen = found + [x for _, _, x in others]
+            if any(np.linalg.norm(c[k] - y) <= 2 * tolerance for y in seen):
+                continue
+            x = _settled(c[k].copy(), curves)
+            gaps = [float(np.linalg.norm(closest_on_polyline(x[None], cc)[0] - x)) for cc in curves]
+            if max(gaps) <= tolerance and all(np.linalg.norm(x - y) > 2 * tolerance for y in seen):
+                others.append((max(gaps), len(others), x))
+    return found + [x for _, _, x in sorted(others, key=lambda o: o[:2])]
 
 
 #: curves must pass this many median point spacings from their meeting point (:func:`check_meeting`)
