@@ -25,7 +25,7 @@ from .features import Touch
 from .io.meeting import MEETING, meeting, meeting_points
 from .io.touch import TactileData
 from .methods import DEFAULT_METHOD, get_method
-from .outliers import judge_ends
+from .outliers import ALPHA, judge_ends
 from .probability import AMBIGUOUS, UNKNOWN_PRIOR, Evidence, evidence, fit_limit, residuals
 from .registration.result import Registration
 from .runner import _Held, _Pool, _Serial, default_workers
@@ -196,6 +196,14 @@ FLOOR = 1e-3
 LOCATED = 10.0
 
 
+def _missing(touch: Touch) -> bool:
+    """Whether the touch's curves miss each other: a curve passes its meeting point farther than its
+    noise allows (``k`` sigma, ``k = sqrt(2 ln(m / ALPHA))`` for ``m`` points, as
+    :mod:`tactrec.outliers` bounds them).  Curves that pass through one point were traced there."""
+    k = np.sqrt(2.0 * np.log(max(len(touch.points), 1) / ALPHA))
+    return bool(meeting(touch.data)[1].max() > k * touch.noise)
+
+
 def _best_error(outcome) -> float:
     """The least error of an outcome's accepted registrations, data units (inf for none)."""
     return min((r.error / r.scale for r in outcome.ranking if r.ok), default=np.inf)
@@ -296,9 +304,10 @@ class Recognizer:
         (:mod:`tactrec.tip`; None: no tip).
 
         Where the data give no ``contact``, the curves' meeting point is :func:`~tactrec.io.meeting.find_contact`'s.
-        Curves may meet at more than one point within the tolerance (:func:`~tactrec.io.meeting.meeting_points`:
-        the far face of a thin plate); where the search from the first finds no fit, each other is
-        searched in turn, the best error kept, until one fits or ``budget`` is spent."""
+        Curves that miss each other (beyond their noise) may meet at more than one point within the
+        tolerance (:func:`~tactrec.io.meeting.meeting_points`: the far face of a thin plate); where the
+        search from the first finds no fit, each other is searched in turn, the best error kept,
+        until one fits or ``budget`` is spent.  Curves that pass through one point were traced there."""
         start = time.perf_counter()
         _check_scale(data, self.models)
         chosen = None
@@ -322,14 +331,17 @@ class Recognizer:
             return touch, search(touch)
 
         touch, outcome = searched(data, budget)
-        if data.contact is None and not self._fits(touch, outcome):
-            # the curves may meet elsewhere too (a thin plate's far face): each meeting point, closest
-            # first, is tried until one's best fits
+        if data.contact is None and _missing(touch) and not self._fits(touch, outcome):
+            # curves that miss each other may meet elsewhere too (a thin plate's far face): each
+            # meeting point, closest first, is tried until one's best fits
             for contact in meeting_points(touch.data.curves, MEETING * touch.data.spacing)[1:]:
                 left = None if budget is None else budget - outcome.work
                 if left is not None and left <= 0:
                     break
-                other, found = searched(dataclasses.replace(data, contact=contact), left)
+                try:
+                    other, found = searched(dataclasses.replace(data, contact=contact), left)
+                except InputError:                 # no estimate there (curves tangent at it): not the contact
+                    continue
                 work = outcome.work + found.work
                 allowed = None if outcome.allowed is None or found.allowed is None else outcome.allowed + found.allowed
                 if _best_error(found) < _best_error(outcome):
