@@ -331,7 +331,7 @@ class Recognizer:
             return touch, search(touch)
 
         touch, outcome = searched(data, budget)
-        if data.contact is None and _missing(touch) and not self._fits(touch, outcome):
+        if data.contact is None and not self._fits(touch, outcome) and _missing(touch):
             # curves that miss each other may meet elsewhere too (a thin plate's far face): each
             # meeting point, closest first, is tried until one's best fits
             for contact in meeting_points(touch.data.curves, MEETING * touch.data.spacing)[1:]:

@@ -85,7 +85,7 @@ from ..registration import closedform_fast, mesh_fast
 from ..registration.result import Registration
 from .base import NOT_SEARCHED, Config, SearchOutcome
 from .common import in_model_units
-from .fast_stages import _cheap, _closed_form, _polished, _refined, _refitted, field_stages, tier_span
+from .fast_stages import _cheap, _closed_form, _polished, _refined, field_stages, tier_span
 
 __all__ = ["FastMethod", "FastConfig", "Tier", "TIERS", "tier_cost", "tier_places"]
 
@@ -344,7 +344,7 @@ class FastMethod:
             depth = max(depth, k + 1)
             work += self._tier(state, group, k, runner)
         top = [i for i in sorted(state.best, key=lambda i: (state.error(i), i)) if state.best[i].ok][:config.polish]
-        for i, found in zip(top, runner.map(_polished, top, touch, config, items=[state.best[i] for i in top])):
+        for i, found in zip(top, runner.map(_polished, top, touch, config, False, items=[state.best[i] for i in top])):
             state.best[i], work = found["registration"], work + found["queries"]
         return SearchOutcome(self._ranking(state, models), settled, int(work), depth, int(allowed))
 
@@ -355,7 +355,7 @@ class FastMethod:
         ranking = list(outcome.ranking)
         ok = [i for i, r in enumerate(ranking) if r.ok]
         work = 0
-        for i, found in zip(ok, runner.map(_refitted, ok, touch, config, items=[ranking[i] for i in ok])):
+        for i, found in zip(ok, runner.map(_polished, ok, touch, config, True, items=[ranking[i] for i in ok])):
             ranking[i], work = found["registration"], work + found["queries"]
         return dataclasses.replace(outcome, ranking=ranking, work=int(outcome.work + work))
 

@@ -1,8 +1,8 @@
 """Method ``fast``'s stages, run per model in worker processes (see :mod:`tactrec.methods.fast`).
 
 Step 1, the cheap stage (:func:`_cheap`); step 3, refinement (:func:`_refined`); the final polish
-(:func:`_polished`); closed-form surfaces (:func:`_closed_form`); and a search's registrations
-refitted on a touch of nearly the same points (:func:`_refitted`).
+(:func:`_polished`, which also refits a search's registrations on a touch of nearly the same
+points); and closed-form surfaces (:func:`_closed_form`).
 
 A touch with a round tip follows the one rule of :mod:`tactrec.tip`: the places, the field screen,
 its field steps and local grid take the mesh and the touch as the search sees them
@@ -208,31 +208,12 @@ def _refined(held, indices, touch, config: FastConfig, chosen: list[dict]) -> li
     return out
 
 
-def _polished(held, indices, touch, config: FastConfig, registrations: list[Registration]) -> list[dict]:
-    """The registrations refined further on all points (kept where that lowers the error)."""
-    out = []
-    for index, r in zip(indices, registrations):
-        model = held.entries[index].model
-        t = in_model_units(touch, model)
-        if model.kind == "mesh":
-            R, tr, error, q = solve(t.exact(model), r.rotation[None], r.translation[None], t.joint_points,
-                                    Criteria(config.polish_iterations, tolerance=config.tolerance,
-                                             history=config.history))
-            better = dataclasses.replace(_registration(model, t, R[0], tr[0], error[0], r.normal_sign),
-                                         alternatives=r.alternatives) if error[0] < r.error else r
-        else:
-            better = dataclasses.replace(closedform_fast.polish(model, r, t.oriented(r.normal_sign),
-                                                                t.joint_points, exact=t.exact(model)),
-                                         normal_sign=r.normal_sign, scale=r.scale)
-            q = config.polish_iterations * len(t.joint_points)
-        out.append({"registration": better, "queries": q})
-    return out
-
-
-def _refitted(held, indices, touch, config: FastConfig, registrations: list[Registration]) -> list[dict]:
-    """The registrations of a search of nearly the same points (the same touch, a few of its points set
-    aside or taken back) refined on this touch's points, from their poses: ``polish_iterations`` exact
-    steps.  Their errors are this touch's, whether or not the steps lower them."""
+def _polished(held, indices, touch, config: FastConfig, fresh: bool, registrations: list[Registration]) -> list[dict]:
+    """The registrations refined further on all points: ``polish_iterations`` exact steps from their
+    poses, kept only where they lower the error.  With ``fresh``, they come from a search of nearly
+    the same points (the same touch, a few of its points set aside or taken back:
+    :meth:`~tactrec.methods.fast.FastMethod.refit`), and their errors are this touch's, whether or not
+    the steps lower them."""
     out = []
     for index, r in zip(indices, registrations):
         model = held.entries[index].model
@@ -242,16 +223,18 @@ def _refitted(held, indices, touch, config: FastConfig, registrations: list[Regi
             R, tr, error, q = solve(exact, r.rotation[None], r.translation[None], t.joint_points,
                                     Criteria(config.polish_iterations, tolerance=config.tolerance,
                                              history=config.history))
-            found = _registration(model, t, R[0], tr[0], error[0], r.normal_sign)
+            better = dataclasses.replace(_registration(model, t, R[0], tr[0], error[0], r.normal_sign),
+                                         alternatives=r.alternatives) if fresh or error[0] < r.error else r
         else:
-            here = float(mean_distance(exact, r.rotation[None], r.translation[None], t.joint_points)[0])
-            found = dataclasses.replace(closedform_fast.polish(model, dataclasses.replace(r, error=here),
-                                                               t.oriented(r.normal_sign), t.joint_points,
-                                                               exact=exact),
-                                        normal_sign=r.normal_sign, scale=r.scale)
-            q = (config.polish_iterations + 1) * len(t.joint_points)
-        out.append({"registration": dataclasses.replace(found, alternatives=r.alternatives, candidates=r.candidates),
-                    "queries": q})
+            start = dataclasses.replace(r, error=float(mean_distance(exact, r.rotation[None], r.translation[None],
+                                                                     t.joint_points)[0])) if fresh else r
+            better = dataclasses.replace(closedform_fast.polish(model, start, t.oriented(r.normal_sign),
+                                                                t.joint_points, exact=exact),
+                                         normal_sign=r.normal_sign, scale=r.scale)
+            q = (config.polish_iterations + int(fresh)) * len(t.joint_points)
+        if fresh:
+            better = dataclasses.replace(better, alternatives=r.alternatives, candidates=r.candidates)
+        out.append({"registration": better, "queries": q})
     return out
 
 
