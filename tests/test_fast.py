@@ -572,9 +572,10 @@ def test_search_limits_bench_measures_the_index_and_the_basin(tmp_path):
 
 def test_every_model_contends_while_the_best_is_not_a_fit_within_the_noise():
     """The search's contention rule (``fast._State``): a best error within ``within`` standard errors
-    of the fit limit is plausible, and a leader that far ahead of the others' standings goes on
-    alone; a best error beyond it means the true pose was missed somewhere, so the leader is not
-    clear however far ahead, and every waiting model takes its next tier."""
+    of the fit limit is plausible, and a plausible leader that far ahead of the others' standings
+    settles the search (its deeper tiers could move its pose, not the answer); a best error beyond it
+    means the true pose was missed somewhere, so the leader is not clear however far ahead, and every
+    waiting model takes its next tier."""
     from types import SimpleNamespace
 
     from tactrec.methods import get_method
@@ -594,8 +595,18 @@ def test_every_model_contends_while_the_best_is_not_a_fit_within_the_noise():
         state.cheapest = {0: error, 1: 10 * error, 2: 20 * error}
         state.deferred = {1: 10 * error, 2: 20 * error}
         assert state.clear() is clear
-        assert state.contending() == ([0] if clear else [0, 1, 2])
-        assert state.settled() == bool(error <= limit)          # the leader has tiers left: only a fit settles
+        assert state.settled() is clear
+        if not clear:
+            assert state.contending() == [0, 1, 2]
+    # a plausible fit that another model's standing comes within ``ratio`` of is not clear: both go on
+    error = 0.99 * plausible
+    state = _State(touch, models, [0, 1, 2], config)
+    state.best[0] = Registration(model="a", error=error)
+    state.next = {0: 1, 1: 1, 2: 1}
+    state.cheapest = {0: error, 1: 0.9 * config.ratio * error, 2: 20 * error}
+    state.deferred = {1: 0.9 * config.ratio * error, 2: 20 * error}
+    assert not state.clear() and not state.settled()
+    assert state.contending() == [0, 1]
 
 
 def test_a_field_tiers_cost_counts_at_least_the_places_it_screens(scans, small):

@@ -40,16 +40,19 @@ The first tier runs on every model.  Each later round runs the next tier of
 the models in contention (:meth:`_State.contending`): those whose best score
 lies within ``ratio`` x the best error (all while the best is not a plausible
 fit, more than ``within`` standard errors above the fit limit: then the true
-pose was missed somewhere, and no model's first tiers rule it out);
-the leader alone once it is a plausible fit clear of all others by that
-factor, to fit its pose; the deferred models, shallowest
-tier first, when none contends.  The search stops (:meth:`_State.settled`)
-when the best error is a *fit*: within what the data's own noise allows (the
-mean distance of a perfect fit, ``sigma sqrt(2 / pi)``, ``sigma`` from the
-curves' third differences) or ``floor`` x the touch's radius on noise-free
-data (or, for a touch with a context, the larger joint fit its caller
-gives: :attr:`tactrec.features.Touch.fit`); or when the best is clear and
-its own tiers have run; or when nothing is left.  ``among`` limits a search
+pose was missed somewhere, and no model's first tiers rule it out); the
+deferred models, shallowest tier first, when none contends.  The search
+stops (:meth:`_State.settled`) when the best error is a *fit*: within what
+the data's own noise allows (the mean distance of a perfect fit, ``sigma
+sqrt(2 / pi)``, ``sigma`` from the curves' third differences) or ``floor`` x
+the touch's radius on noise-free data (or, for a touch with a context, the
+larger joint fit its caller gives: :attr:`tactrec.features.Touch.fit`); or
+when the best is *clear*: a plausible fit whose error every other model's
+standing exceeds by ``ratio``.  No later tier could then change the model,
+only move its pose within what the noise cannot tell apart (the final polish
+still refines it): on noisy data the true pose's error lies above the fit
+limit about half the time, and such a search went on through the leader's
+deepest tiers for nothing.  Else it stops when nothing is left.  ``among`` limits a search
 to chosen models (the budget counts those alone).  It also stops before a round whose estimated cost would take the
 work (closest-point queries) past ``budget`` per model; such a search is
 reported as not settled (the budget counts per model and per normal tried:
@@ -268,14 +271,11 @@ class _State:
                    if i != leader)
 
     def contending(self) -> list[int]:
-        """The models whose next tier runs in this round: the leader alone while it is clear of the
-        others (its pose still to fit); otherwise those whose standing lies within ``ratio`` x the
-        best error (every model while nothing fits plausibly); when none does, the deferred ones
-        whose next tier is the shallowest."""
+        """The models whose next tier runs in this round (the search has not settled, so the best is
+        not clear): those whose standing lies within ``ratio`` x the best error (every model while
+        nothing fits plausibly); when none does, the deferred ones whose next tier is the shallowest."""
         waiting = self.waiting()
-        leader, e1 = self.leader()
-        if self.clear():
-            return [leader] if leader in waiting else []
+        _, e1 = self.leader()
         if not np.isfinite(e1) or e1 > self.plausible:
             near = waiting
         else:
@@ -287,11 +287,11 @@ class _State:
 
     def settled(self) -> bool:
         """Whether the search may stop: the best error is a fit (within the data's noise, or ``floor``
-        x the touch's radius), or the best is clear of the others and its own tiers have all run."""
+        x the touch's radius), or the best is clear of the others (:meth:`clear`)."""
         leader, e1 = self.leader()
         if leader is None or not np.isfinite(e1):
             return False
-        return bool(e1 <= self.limit or (self.clear() and leader not in self.waiting()))
+        return bool(e1 <= self.limit or self.clear())
 
 
 class FastMethod:
