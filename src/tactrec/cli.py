@@ -306,8 +306,14 @@ def build_parser() -> argparse.ArgumentParser:
     add_simulate_parser(sub, count=_count, positive=_positive, nonnegative=_nonnegative,
                         mesh_options=_mesh_options).set_defaults(func=cmd_simulate)
 
-    p = sub.add_parser("bench", help="run a reproduction or benchmark (paper-table2, paper-table3, ...)")
-    p.add_argument("name", metavar="NAME", help="benchmark name")
+    from .bench import BENCHMARKS
+
+    width = max(map(len, BENCHMARKS))
+    p = sub.add_parser("bench", help="run a reproduction or benchmark (paper-table2, paper-table3, ...)",
+                       formatter_class=argparse.RawDescriptionHelpFormatter,
+                       epilog="benchmarks:\n" + "\n".join(f"  {name:<{width}}  {b.summary}"
+                                                            for name, b in BENCHMARKS.items()))
+    p.add_argument("name", metavar="NAME", help="benchmark name (listed below)")
     p.add_argument("--instances", type=_count(1), default=10, help="instances per model (default 10)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--jobs", type=_count(1), default=None, help="worker processes (default: up to 2)")

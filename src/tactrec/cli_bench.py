@@ -83,7 +83,7 @@ def cmd_bench(args) -> int:
         extra["sweeps"] = {"delta": SWEEPS["delta"],
                            "length": [DEFAULTS["length"]] if defaults else args.lengths or SWEEPS["length"],
                            "angle": [DEFAULTS["angle"]] if defaults else args.angles or SWEEPS["angle"]}
-    table = BENCHMARKS[args.name](out=out, instances=args.instances, seed=args.seed, jobs=args.jobs,
+    table = BENCHMARKS[args.name].run(out=out, instances=args.instances, seed=args.seed, jobs=args.jobs,
                                   quiet=args.quiet, method=args.method, **extra)
     print(table["text"])
     written = out / (table.get("benchmark", args.name) + ".json")
