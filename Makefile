@@ -32,4 +32,4 @@ test: install-test
 	$(BIN)/python -m pytest -n 2 -q
 
 clean:
-	rm -rf $(VENV) build *.egg-info src/*.egg-info .pytest_cache tactrec-demo.png bench-out
+	rm -rf $(VENV) build *.egg-info src/*.egg-info .pytest_cache tactrec-demo.png tactrec-demo.html bench-out

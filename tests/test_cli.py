@@ -108,11 +108,15 @@ def test_simulated_file_holds_a_valid_touch_in_the_sensor_frame(tmp_path):
 
 @pytest.mark.slow
 def test_demo_prints_a_correct_recognition_and_writes_a_picture(tmp_path, capsys):
+    """The demo writes its picture and, beside it, the 3-D page, and prints both paths."""
     picture = tmp_path / "demo.png"
     assert main(["demo", "--seed", "1", "--out", str(picture)]) == 0
     out = capsys.readouterr().out
     assert "(correct)" in out and "ranking:" in out
     assert picture.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    page = tmp_path / "demo.html"
+    assert f"wrote {picture}" in out and f"wrote {page}" in out
+    assert page.read_text(encoding="utf-8").startswith("<!DOCTYPE html>")
 
 
 def test_bench_paper_example_runs_and_writes_its_table(tmp_path, capsys):

@@ -201,6 +201,13 @@ def cmd_simulate(args) -> int:
     return run(args, floats=_floats)
 
 
+def cmd_show(args) -> int:
+    from .cli_show import cmd_show as run
+    from .database import open_models
+
+    return run(args, open_models=open_models, warn=_warn)
+
+
 def cmd_bench(args) -> int:
     from .cli_bench import cmd_bench as run
 
@@ -253,7 +260,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("demo", help="simulate a touch on a random built-in model and recognise it")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    p.add_argument("--out", default="tactrec-demo.png", help="picture to write (default tactrec-demo.png)")
+    p.add_argument("--out", default="tactrec-demo.png", help="picture to write (default tactrec-demo.png); the 3-D page goes beside it, as .html")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_demo)
 
@@ -305,6 +312,11 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_simulate_parser(sub, count=_count, positive=_positive, nonnegative=_nonnegative,
                         mesh_options=_mesh_options).set_defaults(func=cmd_simulate)
+
+    from .cli_show import add_show_parser
+
+    add_show_parser(sub, count=_count, mesh_options=_mesh_options, methods=METHODS,
+                    default_method=DEFAULT_METHOD).set_defaults(func=cmd_show)
 
     from .bench import BENCHMARKS
 

@@ -5,7 +5,7 @@ protocol P3 (three 24 mm curves, 60 degrees apart, points every 0.3 mm,
 delivered in the sensor's frame), recognises the touch against every
 built-in model (the closed-form surfaces and the ten YCB scans), prints the
 ranking and writes a picture of the recognised model with the registered
-curves.  The model database is built once into the cache folder
+curves, and beside it the same in an offline 3-D page (:mod:`tactrec.viewer`).  The model database is built once into the cache folder
 (:func:`tactrec.database.cache_folder`) and reused.
 """
 
@@ -26,7 +26,8 @@ LENGTH, ANGLE, SPACING = 24.0, 60.0, 0.3          # mm, degrees, mm: the paper's
 
 
 def run_demo(*, seed: int = 0, out="tactrec-demo.png", quiet: bool = True) -> dict:
-    """Run the demo; returns ``{"text", "result", "truth", "picture"}``."""
+    """Run the demo; returns ``{"text", "result", "truth", "picture", "view"}`` (``view``: the HTML page
+    beside the picture, :mod:`tactrec.viewer`)."""
     rng = np.random.default_rng(seed)
     start = time.perf_counter()
     db = cached_database(BUILTIN_SETS["builtin"], name="builtin", quiet=quiet)
@@ -57,7 +58,7 @@ def run_demo(*, seed: int = 0, out="tactrec-demo.png", quiet: bool = True) -> di
     best = result.registration
     if best is not None and best.model == model.name:
         lines.append(f"contact found {np.linalg.norm(best.location - truth['contact']):.2f} mm from the truth")
-    picture = None
+    picture = view = None
     if out and best is not None:
         from .plots import plot_registration, save_figure
 
@@ -68,4 +69,13 @@ def run_demo(*, seed: int = 0, out="tactrec-demo.png", quiet: bool = True) -> di
         save_figure(ax, out)
         picture = str(out)
         lines.append(f"wrote {out}")
-    return {"text": "\n".join(lines), "result": result, "truth": truth, "picture": picture}
+        from pathlib import Path
+
+        from .viewer import touch_scene, write_view
+
+        page = Path(out).with_suffix(".html")
+        write_view(page, touch_scene(result.to_json(), touch.curves, {e.name: e.model for e in db.entries},
+                                     title=f"tactrec demo: a touch of {model.name}"))
+        view = str(page)
+        lines.append(f"wrote {page} (open it in a browser: the recognised model, the curves, the runners-up)")
+    return {"text": "\n".join(lines), "result": result, "truth": truth, "picture": picture, "view": view}
