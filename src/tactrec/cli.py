@@ -260,7 +260,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("demo", help="simulate a touch on a random built-in model and recognise it")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    p.add_argument("--out", default="tactrec-demo.png", help="picture to write (default tactrec-demo.png); the 3-D page goes beside it, as .html")
+    p.add_argument("--out", default="tactrec-demo.png",
+                   help="picture to write (default tactrec-demo.png); the 3-D page goes beside it, as .html")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_demo)
 

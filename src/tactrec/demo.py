@@ -5,13 +5,15 @@ protocol P3 (three 24 mm curves, 60 degrees apart, points every 0.3 mm,
 delivered in the sensor's frame), recognises the touch against every
 built-in model (the closed-form surfaces and the ten YCB scans), prints the
 ranking and writes a picture of the recognised model with the registered
-curves, and beside it the same in an offline 3-D page (:mod:`tactrec.viewer`).  The model database is built once into the cache folder
+curves, and beside it the same in an offline 3-D page (:mod:`tactrec.viewer`).
+The model database is built once into the cache folder
 (:func:`tactrec.database.cache_folder`) and reused.
 """
 
 from __future__ import annotations
 
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -69,8 +71,6 @@ def run_demo(*, seed: int = 0, out="tactrec-demo.png", quiet: bool = True) -> di
         save_figure(ax, out)
         picture = str(out)
         lines.append(f"wrote {out}")
-        from pathlib import Path
-
         from .viewer import touch_scene, write_view
 
         page = Path(out).with_suffix(".html")
