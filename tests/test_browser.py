@@ -23,35 +23,47 @@ def _chromium() -> str:
     return path
 
 
-def visit(path) -> dict:
-    """Open ``path`` in headless Chromium; what happened: console errors, requests beyond the file,
-    whether it drew, the side panel's models, and the plot's screenshot as an ``(h, w, 3)`` array."""
+@pytest.fixture(scope="module")
+def browser():
+    """One headless Chromium for the module's pages (each page opens in its own context)."""
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as p:
+        chromium = p.chromium.launch(executable_path=_chromium(),
+                                     args=["--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader"])
+        try:
+            yield chromium
+        finally:
+            chromium.close()
+
+
+def visit(browser, path) -> dict:
+    """Open ``path`` in a fresh context of ``browser``; what happened: console errors, requests beyond
+    the file, whether it drew, the side panel's models, and the plot's screenshot as an ``(h, w, 3)``
+    array."""
     from io import BytesIO
 
     from matplotlib.image import imread
-    from playwright.sync_api import sync_playwright
 
     report = {"errors": [], "requests": []}
     url = path.resolve().as_uri()
-    with sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=_chromium(),
-                                    args=["--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader"])
+    context = browser.new_context(viewport={"width": WIDTH, "height": HEIGHT})
+    try:
+        page = context.new_page()
+        page.on("console", lambda m: report["errors"].append(m.text) if m.type == "error" else None)
+        page.on("pageerror", lambda e: report["errors"].append(str(e)))
+        page.on("request", lambda r: report["requests"].append(r.url) if r.url != url else None)
+        page.goto(url)
         try:
-            page = browser.new_page(viewport={"width": WIDTH, "height": HEIGHT})
-            page.on("console", lambda m: report["errors"].append(m.text) if m.type == "error" else None)
-            page.on("pageerror", lambda e: report["errors"].append(str(e)))
-            page.on("request", lambda r: report["requests"].append(r.url) if r.url != url else None)
-            page.goto(url)
-            try:
-                page.wait_for_selector("body[data-drawn]", timeout=30000)
-                report["drawn"] = True
-            except Exception:
-                report["drawn"] = False
-            page.wait_for_timeout(300)
-            report["models"] = page.eval_on_selector_all("#models li", "els => els.map(e => e.dataset.model)")
-            report["pixels"] = imread(BytesIO(page.screenshot()), format="png")[:, SIDE:, :3]
-        finally:
-            browser.close()
+            page.wait_for_selector("body[data-drawn]", timeout=30000)
+            report["drawn"] = True
+        except Exception:
+            report["drawn"] = False
+        page.wait_for_timeout(300)
+        report["models"] = page.eval_on_selector_all("#models li", "els => els.map(e => e.dataset.model)")
+        report["pixels"] = imread(BytesIO(page.screenshot()), format="png")[:, SIDE:, :3]
+    finally:
+        context.close()
     return report
 
 
@@ -74,16 +86,16 @@ def page_of_a_result(scans, tmp_path_factory):
     return path, result
 
 
-def test_the_page_draws_its_model_offline_without_errors(page_of_a_result):
+def test_the_page_draws_its_model_offline_without_errors(browser, page_of_a_result):
     path, result = page_of_a_result
-    report = visit(path)
+    report = visit(browser, path)
     assert report["errors"] == [] and report["requests"] == []
     assert report["drawn"]
     assert report["models"] == [r["model"] for r in result["ranking"]]
     assert 0.05 < model_share(report["pixels"]) < 0.9
 
 
-def test_a_blank_erring_or_fetching_page_fails_the_checks(page_of_a_result, tmp_path):
+def test_a_blank_erring_or_fetching_page_fails_the_checks(browser, page_of_a_result, tmp_path):
     path, _ = page_of_a_result
     text = path.read_text(encoding="utf-8")
     fetching = tmp_path / "fetching.html"
@@ -93,6 +105,6 @@ def test_a_blank_erring_or_fetching_page_fails_the_checks(page_of_a_result, tmp_
                       encoding="utf-8")
     blank = tmp_path / "blank.html"
     blank.write_text(text.replace("show(0); }", "document.body.dataset.drawn = 'yes'; }"), encoding="utf-8")
-    assert any("example.invalid" in url for url in visit(fetching)["requests"])
-    assert "broken" in visit(erring)["errors"]
-    assert model_share(visit(blank)["pixels"]) < 0.01
+    assert any("example.invalid" in url for url in visit(browser, fetching)["requests"])
+    assert "broken" in visit(browser, erring)["errors"]
+    assert model_share(visit(browser, blank)["pixels"]) < 0.01

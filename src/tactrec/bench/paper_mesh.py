@@ -23,11 +23,12 @@ __all__ = ["run_table4"]
 
 
 def run_table4(*, out, instances: int = 1, seed: int = 0, jobs=None, quiet: bool = False,
-               method: str = "paper") -> dict:
-    """P4: ``instances`` repeats (different sampling seeds) per model; medians reported."""
+               method: str = "paper", models: tuple[str, ...] | None = None) -> dict:
+    """P4: ``instances`` repeats (different sampling seeds) per model (``models``, names of the
+    ``paper-fig11`` scans; all ten by default); medians reported."""
     out = Path(out)
     rows = {}
-    for name in BUILTIN_SETS["paper-fig11"]:
+    for name in models or BUILTIN_SETS["paper-fig11"]:
         model = load_model(name)
         samples, t_sample, t_table = [], [], []
         for i in range(instances):
