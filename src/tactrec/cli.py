@@ -108,6 +108,12 @@ def _count(minimum: int):
     return parse
 
 
+def _one_source(args, command: str) -> None:
+    """Refuse a command given both or neither of ``--db`` and ``--models``."""
+    if (args.db is None) == (not args.models):
+        raise InputError("give either --db DB or --models MODEL...", f"tactrec {command}")
+
+
 def _warn(line: str) -> None:
     print(f"tactrec: warning: {line}", file=sys.stderr)
 
@@ -142,10 +148,10 @@ def cmd_recognize(args) -> int:
     from .engine import preload
     from .io.touch import load_touch
     from .methods import get_method
-    from .recognition import Recognizer, default_workers
+    from .recognition import Recognizer
+    from .runner import workers_for
 
-    if (args.db is None) == (not args.models):
-        raise InputError("give either --db DB or --models MODEL...", "tactrec recognize")
+    _one_source(args, "recognize")
     from .cli_session import format_session, recognize_session
     from .io.session import is_session_file, load_session
 
@@ -160,8 +166,7 @@ def cmd_recognize(args) -> int:
     finally:
         if loading is not None:
             loading.join()
-    workers = default_workers() if len(db) > 4 else 1
-    with Recognizer(db, method=args.method, workers=workers, unknown_prior=args.unknown_prior,
+    with Recognizer(db, method=args.method, workers=workers_for(db), unknown_prior=args.unknown_prior,
                     **_recognition_options(args)) as recognizer:
         results = [recognize_session(recognizer, x).result if isinstance(x, list) else recognizer.recognize(x)
                    for x in inputs]
@@ -205,6 +210,7 @@ def cmd_show(args) -> int:
     from .cli_show import cmd_show as run
     from .database import open_models
 
+    _one_source(args, "show")
     return run(args, open_models=open_models, warn=_warn)
 
 
@@ -218,8 +224,7 @@ def cmd_next(args) -> int:
     from .cli_session import cmd_next as run
     from .database import open_models
 
-    if (args.db is None) == (not args.models):
-        raise InputError("give either --db DB or --models MODEL...", "tactrec next")
+    _one_source(args, "next")
     return run(args, open_models=open_models, options={}, warn=_warn)
 
 
@@ -228,8 +233,7 @@ def cmd_serve(args) -> int:
     from .database import open_models
     from .methods import get_method
 
-    if (args.db is None) == (not args.models):
-        raise InputError("give either --db DB or --models MODEL...", "tactrec serve")
+    _one_source(args, "serve")
     get_method(args.method).configure(**_recognition_options(args))          # a bad option before any work
     return run(args, open_models=open_models, options=_recognition_options(args), warn=_warn)
 

@@ -47,14 +47,14 @@ def format_session(name: str, result) -> str:
 def cmd_next(args, *, open_models, options, warn) -> int:
     """``tactrec next SESSION --db DB``: where to touch next."""
     from .io.session import load_session
-    from .recognition import Recognizer, default_workers
+    from .recognition import Recognizer
+    from .runner import workers_for
 
     touches = load_session(args.session)
     units = next(t.data.units for t in touches if hasattr(t, "data"))
     radius = args.radius if args.radius is not None else default_radius(units)
     db = open_models(db=args.db, models=args.models, warn=warn, quiet=args.quiet, units=args.units, scale=args.scale)
-    workers = default_workers() if len(db) > 4 else 1
-    with Recognizer(db, method=args.method, workers=workers, unknown_prior=args.unknown_prior,
+    with Recognizer(db, method=args.method, workers=workers_for(db), unknown_prior=args.unknown_prior,
                     **options) as recognizer:
         session = recognize_session(recognizer, touches)
         if not session.result.ranking:
@@ -96,12 +96,12 @@ def add_next_parser(sub, *, positive, mesh_options, methods, default_method) -> 
 
 def cmd_serve(args, *, open_models, options, warn) -> int:
     """``tactrec serve --db DB``: requests on standard input, answers on standard output (:mod:`tactrec.service`)."""
-    from .recognition import Recognizer, default_workers
+    from .recognition import Recognizer
+    from .runner import workers_for
     from .service import serve
 
     db = open_models(db=args.db, models=args.models, warn=warn, quiet=True, units=args.units, scale=args.scale)
-    workers = default_workers() if len(db) > 4 else 1
-    with Recognizer(db, method=args.method, workers=workers, unknown_prior=args.unknown_prior,
+    with Recognizer(db, method=args.method, workers=workers_for(db), unknown_prior=args.unknown_prior,
                     **options) as recognizer:
         if not args.quiet:
             print(f"tactrec serve: {len(db)} models, {args.method}; one JSON request per line", file=sys.stderr,

@@ -13,7 +13,7 @@ def read_result(path, data_path) -> dict:
     """The result for ``data_path`` in a file ``tactrec recognize --json`` wrote (one JSON object a
     line; with several, the line whose ``"file"`` names ``data_path``), validated enough to draw."""
     from .io.session import rigid_pose
-    from .io.touch import _read_text, read_json
+    from .io.touch import _read_text, _vector, read_json
 
     source = str(path)
     lines = [line for line in _read_text(Path(path)).splitlines() if line.strip()]
@@ -35,9 +35,7 @@ def read_result(path, data_path) -> dict:
         if entry.get("error") is None:
             continue
         rigid_pose(entry.get("rotation"), entry.get("translation"), source, f"{entry['model']}'s pose")
-        location = entry.get("location")
-        if not (isinstance(location, list) and len(location) == 3 and all(isinstance(x, (int, float)) for x in location)):
-            raise InputError(f"{entry['model']}'s 'location' must be three numbers", source)
+        _vector(entry.get("location"), f"{entry['model']}'s location", source)
     return result
 
 
@@ -46,11 +44,10 @@ def cmd_show(args, *, open_models, warn) -> int:
     write the page."""
     from .io.session import is_session_file
     from .io.touch import load_touch
-    from .recognition import Recognizer, default_workers
+    from .recognition import Recognizer
+    from .runner import workers_for
     from .viewer import touch_scene, write_view
 
-    if (args.db is None) == (not args.models):
-        raise InputError("give either --db DB or --models MODEL...", "tactrec show")
     if is_session_file(args.data):
         raise InputError("a session file is not drawn yet: give one of its touches", args.data)
     touch = load_touch(args.data)
@@ -58,7 +55,7 @@ def cmd_show(args, *, open_models, warn) -> int:
     db = open_models(db=args.db, models=args.models, warn=warn, quiet=args.quiet, units=args.units, scale=args.scale)
     models = {e.name: e.model for e in db.entries}
     if result is None:
-        with Recognizer(db, method=args.method, workers=default_workers() if len(db) > 4 else 1) as recognizer:
+        with Recognizer(db, method=args.method, workers=workers_for(db)) as recognizer:
             result = recognizer.recognize(touch).to_json()
     missing = sorted({r["model"] for r in result["ranking"] if r.get("error") is not None} - set(models))
     if missing:

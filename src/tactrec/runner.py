@@ -9,12 +9,18 @@ from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from typing import Sequence
 
-__all__ = ["default_workers"]
+__all__ = ["default_workers", "workers_for"]
 
 
 def default_workers() -> int:
     """Worker processes for a :class:`Recognizer`: two where the machine has them."""
     return max(1, min(2, os.cpu_count() or 1))
+
+
+def workers_for(models) -> int:
+    """Worker processes for a command's :class:`Recognizer` over ``models``: :func:`default_workers`
+    for more than four, else this process alone."""
+    return default_workers() if len(models) > 4 else 1
 
 
 class _Held:
