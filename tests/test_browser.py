@@ -2,9 +2,12 @@
 installs), driven by Playwright with that executable (no downloaded browser build).
 
 The page must draw its model with no console error and no request beyond its own file; the side
-panel must list the result's models.  The same checks are run on a broken copy of the page, so that
+panel must list the result's models (and a session's touches).  A still (``--png``) must show the
+model and its red curves.  The same checks are run on a broken copy of the page, so that
 a blank, erring or fetching page is seen to fail them."""
 
+import json
+import re
 import shutil
 
 import numpy as np
@@ -12,15 +15,9 @@ import pytest
 
 from tactrec.recognition import Recognizer
 from tactrec.simulation import simulate_touch
-from tactrec.viewer import touch_scene, write_view
+from tactrec.viewer import render_still, still, touch_scene, write_view
 
 WIDTH, HEIGHT, SIDE = 1200, 800, 340          # the window, and the side panel's width (page.py)
-
-
-def _chromium() -> str:
-    path = shutil.which("chromium")
-    assert path, "chromium not found: 'make test' installs Debian's chromium package"
-    return path
 
 
 @pytest.fixture(scope="module")
@@ -29,8 +26,8 @@ def browser():
     from playwright.sync_api import sync_playwright
 
     with sync_playwright() as p:
-        chromium = p.chromium.launch(executable_path=_chromium(),
-                                     args=["--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader"])
+        assert shutil.which("chromium"), "chromium not found: 'make test' installs Debian's chromium package"
+        chromium = still.browser(p)
         try:
             yield chromium
         finally:
@@ -61,6 +58,7 @@ def visit(browser, path) -> dict:
             report["drawn"] = False
         page.wait_for_timeout(300)
         report["models"] = page.eval_on_selector_all("#models li", "els => els.map(e => e.dataset.model)")
+        report["legend"] = page.eval_on_selector_all("#legend li", "els => els.map(e => e.textContent)")
         report["pixels"] = imread(BytesIO(page.screenshot()), format="png")[:, SIDE:, :3]
     finally:
         context.close()
@@ -108,3 +106,64 @@ def test_a_blank_erring_or_fetching_page_fails_the_checks(browser, page_of_a_res
     assert any("example.invalid" in url for url in visit(browser, fetching)["requests"])
     assert "broken" in visit(browser, erring)["errors"]
     assert model_share(visit(browser, blank)["pixels"]) < 0.01
+
+
+def red_share(pixels: np.ndarray) -> float:
+    """The share of pixels that are a curve's red (Fig. 14's colour, shaded)."""
+    r, g, b = pixels[..., 0], pixels[..., 1], pixels[..., 2]
+    return float(((r > 0.45) & (g < 0.3) & (b < 0.3) & (r > 2.0 * g)).mean())
+
+
+def test_a_still_shows_the_model_and_its_curves_at_print_size(browser, page_of_a_result, tmp_path):
+    """The still of the mug's touch: 1600 x 1200 pixels, the model a plausible share of them, the red
+    curves at least 0.1 % (visible at print size); without the curves, none red."""
+    from matplotlib.image import imread
+
+    from tactrec.viewer.page import page as page_text
+
+    path, result = page_of_a_result
+    text = path.read_text(encoding="utf-8")
+    png = tmp_path / "still.png"
+    render_still(text, png, browser=browser)
+    pixels = imread(png)[..., :3]
+    assert pixels.shape[:2] == (1200, 1600)
+    assert 0.05 < model_share(pixels) < 0.9
+    assert red_share(pixels) > 1e-3
+    bare = json.loads(re.search(r'id="scene">(.*?)</script>', text, re.S).group(1).replace("<\\/", "</"))
+    for view in bare["views"]:
+        view["curves"] = []
+    render_still(page_text(bare), png, browser=browser)
+    assert red_share(imread(png)[..., :3]) < 1e-4
+
+
+def test_a_sessions_page_draws_and_lists_its_touches(browser, tmp_path):
+    """A session of two touches of the elliptic cylinder: drawn offline without errors, its models and
+    touches listed."""
+    from tactrec.bench.common import instance_rng
+    from tactrec.io.session import SessionTouch
+    from tactrec.simulation import random_rigid_motion, sensor_to_world, simulate_random_touch
+    from tactrec.surfaces import load_model
+    from tactrec.viewer import session_scene
+
+    names = ["elliptic-cylinder", "cylinder-50", "sphere-33"]
+    models = {n: load_model(n) for n in names}
+    from tactrec.database import open_models
+
+    db = open_models(models=names)
+    pose = random_rigid_motion(instance_rng(3), extent=100.0)
+    items = []
+    with Recognizer(db) as recognizer:
+        session = recognizer.session()
+        for i in range(2):
+            touch = simulate_random_touch(models["elliptic-cylinder"], rng=instance_rng(4, i), points=21, spacing=0.5,
+                                          angle=60.0, noise=0.01, noise_kind="gaussian", outward=False)
+            items.append(SessionTouch(touch, *sensor_to_world(touch, pose)))
+            session.add(touch, (items[-1].rotation, items[-1].translation))
+        result = session.result.to_json()
+    path = tmp_path / "session.html"
+    write_view(path, session_scene(result, items, models, title="session"))
+    report = visit(browser, path)
+    assert report["errors"] == [] and report["requests"] == [] and report["drawn"]
+    assert report["models"] == [r["model"] for r in result["ranking"]]
+    assert report["legend"][:2] == ["touch 1", "touch 2"]
+    assert 0.05 < model_share(report["pixels"]) < 0.9

@@ -115,3 +115,149 @@ def test_show_refuses_a_result_it_cannot_draw_in_one_line(tmp_path, capsys):
         err = capsys.readouterr().err.strip()
         assert len(err.splitlines()) == 1 and name in err and words in err, err
         assert not out.exists()
+
+
+def test_a_sessions_views_draw_each_touch_where_the_joint_pose_puts_it():
+    """Three touches of the egg and a fourth after it moved (slipped), in random sensor frames: the
+    egg's view draws every touch, each fitted touch's curves on the egg at its per-touch error, the
+    slipped one faded and crossed (and listed so), the axes' range about the egg, not the slipped
+    curves."""
+    from test_fast import _small_meshes
+
+    from tactrec.bench.common import instance_rng
+    from tactrec.io.session import SessionTouch
+    from tactrec.simulation import random_rigid_motion, sensor_to_world, simulate_random_touch
+    from tactrec.viewer import session_scene
+
+    small = _small_meshes()
+    models = {e.name: e.model for e in small}
+    noisy = dict(points=41, spacing=0.3, angle=60.0, noise=0.03, noise_kind="gaussian", outward=False)
+    poses = [random_rigid_motion(instance_rng(9), extent=300.0)] * 3 + [random_rigid_motion(instance_rng(10), extent=300.0)]
+    items = []
+    with Recognizer(small) as recognizer:
+        session = recognizer.session()
+        for i, pose in enumerate(poses):
+            touch = simulate_random_touch(models["egg"], rng=instance_rng(11, i), **noisy)
+            R, t = sensor_to_world(touch, pose)
+            items.append(SessionTouch(touch, R, t))
+            session.add(touch, (R, t))
+        result = session.result.to_json()
+        proposal = session.next(radius=20.0, rng=0).to_json()
+    assert result["best"] == "egg" and result["slipped"] == [3]
+    scene = session_scene(result, items, models, proposal=proposal, shown=2)
+    assert [e["name"] for e in scene["legend"][:4]] == ["touch 1", "touch 2", "touch 3", "touch 4 (slipped)"]
+    egg = scene["views"][0]
+    assert egg["model"] == "egg"
+    per_touch = next(r for r in result["ranking"] if r["model"] == "egg")["per_touch_error"]
+    for k in range(4):
+        tubes = [c for c in egg["curves"] if c["name"].startswith(f"touch {k + 1}")]
+        assert len(tubes) == 3 and all(c["opacity"] == (0.35 if k == 3 else 1.0) for c in tubes)
+        centres = np.concatenate([np.asarray(c["vertices"]).reshape(-1, SIDES, 3).mean(axis=1) for c in tubes])
+        assert abs(models["egg"].distance(centres).mean() - per_touch[k]) <= 0.02 * per_touch[k] + 1e-3 * egg["size"]
+    symbols = {m["name"]: m["symbol"] for m in egg["marks"]}
+    assert symbols["touch 4 (slipped)"] == "x" and symbols["touch 1"] == "circle"
+    lo, hi = np.asarray(egg["range"])
+    v = models["egg"].vertices
+    assert np.all(lo >= v.min(axis=0) - 0.06 * egg["size"]) and np.all(hi <= v.max(axis=0) + 0.06 * egg["size"])
+    # the egg holds all but 1e-3 of the probability: nothing to propose, nothing drawn for it
+    assert proposal["contact"] is None and len(scene["legend"]) == 4
+    assert not any(c["name"].startswith("next") for c in egg["curves"]) and egg["lines"] == []
+
+
+def test_a_proposed_touch_is_drawn_on_each_hypothesis_that_it_separates():
+    """One-touch sessions on the capsule and the ring (round and flat patches alike, so the
+    hypotheses stay open): where a touch is proposed, each view draws its approach line, its three
+    curves and its contact; on the most probable hypothesis the contact lies on the surface and
+    the curves start and end on it."""
+    from test_fast import _small_meshes
+
+    from tactrec.bench.common import instance_rng
+    from tactrec.io.session import SessionTouch
+    from tactrec.simulation import random_rigid_motion, sensor_to_world, simulate_random_touch
+    from tactrec.viewer import session_scene
+
+    small = _small_meshes()
+    models = {e.name: e.model for e in small}
+    noisy = dict(points=21, spacing=0.3, angle=60.0, noise=0.03, noise_kind="gaussian", outward=False)
+    proposed = 0
+    with Recognizer(small) as recognizer:
+        for k in range(6):
+            name = ("capsule", "ring")[k % 2]
+            touch = simulate_random_touch(models[name], rng=instance_rng(13, k), **noisy)
+            R, t = sensor_to_world(touch, random_rigid_motion(instance_rng(12, k), extent=300.0))
+            session = recognizer.session()
+            session.add(touch, (R, t))
+            result, proposal = session.result.to_json(), session.next(radius=20.0, rng=k).to_json()
+            scene = session_scene(result, [SessionTouch(touch, R, t)], models, proposal=proposal, shown=4)
+            if proposal["contact"] is None:
+                assert not any(m["name"] == "next: contact" for v in scene["views"] for m in v["marks"])
+                continue
+            proposed += 1
+            assert scene["legend"][-1]["name"].startswith("next touch")
+            for v in scene["views"]:
+                assert [ln["name"] for ln in v["lines"]] == ["next: approach"]
+                assert sum(c["name"].startswith("next: curve") for c in v["curves"]) == 3
+            best = scene["views"][[v["model"] for v in scene["views"]].index(proposal["hypotheses"][0]["model"])]
+            model = models[best["model"]]
+            contact = next(m["point"] for m in best["marks"] if m["name"] == "next: contact")
+            assert model.distance(np.asarray([contact]))[0] < 1e-3 * best["size"]
+            for c in (c for c in best["curves"] if c["name"].startswith("next: curve")):
+                ends = np.asarray(c["vertices"]).reshape(-1, SIDES, 3).mean(axis=1)[[0, -1]]
+                assert np.all(model.distance(ends) < 0.01 * best["size"])
+    assert proposed >= 3
+
+
+def _scene_of(path) -> dict:
+    text = path.read_text(encoding="utf-8")
+    return json.loads(re.search(r'<script type="application/json" id="scene">(.*?)</script>', text,
+                                re.S).group(1).replace("<\\/", "</"))
+
+
+def test_show_draws_a_session_and_its_saved_result_and_proposal_alike(tmp_path, capsys):
+    """``tactrec show SESSION``: a session's page (two touches of the elliptic cylinder in their sensors'
+    frames); drawn again from ``recognize --json``'s result and ``next --json``'s proposal, the same
+    scene; a proposal for a single touch, a malformed proposal and no output are one line each."""
+    from tactrec.bench.common import instance_rng
+    from tactrec.io.session import SessionTouch, save_session
+    from tactrec.simulation import random_rigid_motion, sensor_to_world, simulate_random_touch
+    from tactrec.surfaces import load_model
+
+    model = load_model("elliptic-cylinder")
+    pose = random_rigid_motion(instance_rng(3), extent=100.0)
+    items = []
+    for i in range(2):
+        touch = simulate_random_touch(model, rng=instance_rng(4, i), points=21, spacing=0.5, angle=60.0, noise=0.01,
+                                      noise_kind="gaussian", outward=False)
+        items.append(SessionTouch(touch, *sensor_to_world(touch, pose)))
+    session = tmp_path / "session.json"
+    save_session(items, session)
+    models = ["elliptic-cylinder", "cylinder-50", "cylinder-94", "sphere-33"]
+    out = tmp_path / "view.html"
+    assert main(["show", str(session), "--models", *models, "--out", str(out), "--quiet"]) == 0
+    scene = _scene_of(out)
+    assert scene["kind"] == "session" and scene["views"][0]["model"] == scene["best"] == "elliptic-cylinder"
+    assert [e["name"] for e in scene["legend"][:2]] == ["touch 1", "touch 2"]
+    capsys.readouterr()
+    assert main(["recognize", str(session), "--models", *models, "--json"]) == 0
+    result = tmp_path / "result.json"
+    result.write_text(capsys.readouterr().out, encoding="utf-8")
+    assert main(["next", str(session), "--models", *models, "--json"]) == 0
+    proposal = tmp_path / "next.json"
+    proposal.write_text(capsys.readouterr().out, encoding="utf-8")
+    again = tmp_path / "again.html"
+    assert main(["show", str(session), "--models", *models, "--result", str(result), "--next", str(proposal),
+                 "--out", str(again), "--quiet"]) == 0
+    assert _scene_of(again) == scene
+    touch = tmp_path / "touch.json"
+    touch.write_text(json.dumps(items[0].data.to_json()), encoding="utf-8")
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"contact": [0, 0, 0], "directions": "north"}', encoding="utf-8")
+    cases = [(["show", str(touch), "--next", str(proposal), "--out", str(out)], "next.json"),
+             (["show", str(session), "--next", str(bad), "--out", str(tmp_path / "b.html")], "bad.json"),
+             (["show", str(session)], "--out")]
+    for argv, words in cases:
+        capsys.readouterr()
+        assert main(argv + ["--models", *models]) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and words in err, err
+    assert not (tmp_path / "b.html").exists()

@@ -1,4 +1,5 @@
-"""The ``tactrec show`` command: a touch's recognition drawn in one offline HTML page (:mod:`tactrec.viewer`)."""
+"""The ``tactrec show`` command: a touch's or a session's recognition drawn in one offline HTML page, and
+its still (:mod:`tactrec.viewer`)."""
 
 from __future__ import annotations
 
@@ -6,20 +7,30 @@ from pathlib import Path
 
 from .errors import InputError
 
-__all__ = ["cmd_show", "add_show_parser", "read_result"]
+__all__ = ["cmd_show", "add_show_parser", "read_result", "read_proposal"]
+
+
+def _objects(path) -> list:
+    from .io.touch import _read_text, read_json
+
+    source = str(path)
+    results = [read_json(line, source) for line in _read_text(Path(path)).splitlines() if line.strip()]
+    if not all(isinstance(r, dict) for r in results):
+        raise InputError("each line must be a JSON object", source)
+    return results
 
 
 def read_result(path, data_path) -> dict:
     """The result for ``data_path`` in a file ``tactrec recognize --json`` wrote (one JSON object a
     line; with several, the line whose ``"file"`` names ``data_path``), validated enough to draw."""
     from .io.session import rigid_pose
-    from .io.touch import _read_text, _vector, read_json
+    from .io.touch import _vector
 
     source = str(path)
-    lines = [line for line in _read_text(Path(path)).splitlines() if line.strip()]
-    results = [read_json(line, source) for line in lines]
-    if not all(isinstance(r, dict) for r in results):
-        raise InputError("not a result of 'tactrec recognize --json': each line must be a JSON object", source)
+    try:
+        results = _objects(path)
+    except InputError as e:
+        raise InputError(f"not a result of 'tactrec recognize --json': {e.reason}", source) from None
     if len(results) > 1:
         named = [r for r in results if Path(str(r.get("file", ""))).name == Path(data_path).name]
         if len(named) != 1:
@@ -39,46 +50,109 @@ def read_result(path, data_path) -> dict:
     return result
 
 
+def read_proposal(path) -> dict:
+    """A proposal ``tactrec next --json`` wrote, validated enough to draw."""
+    from .io.session import MissedLine
+    from .io.touch import _vector
+
+    source = str(path)
+    objects = _objects(path)
+    if len(objects) != 1:
+        raise InputError(f"not one proposal of 'tactrec next --json' ({len(objects)} objects)", source)
+    proposal = objects[0]
+    if proposal.get("contact") is None:
+        return proposal
+    _vector(proposal["contact"], "contact", source)
+    directions = proposal.get("directions")
+    if not isinstance(directions, list) or not directions:
+        raise InputError("the proposal has no 'directions'", source)
+    for d in directions:
+        _vector(d, "direction", source)
+    if proposal.get("approach") is not None:
+        MissedLine.parse(proposal["approach"], source)
+    return proposal
+
+
+def _session(args, touches, db, result):
+    """The session's result and proposal: read from ``--result`` and ``--next``, else computed."""
+    from .cli_session import recognize_session
+    from .recognition import Recognizer
+    from .runner import workers_for
+    from .service import default_radius
+
+    proposal = read_proposal(args.next) if args.next else None
+    if result is not None:
+        return result, proposal
+    with Recognizer(db, method=args.method, workers=workers_for(db)) as recognizer:
+        session = recognize_session(recognizer, touches)
+        result = session.result.to_json()
+        if proposal is None and session.result.ranking:
+            units = next(t.data.units for t in touches if hasattr(t, "data"))
+            proposal = session.next(radius=default_radius(units), rng=args.seed).to_json()
+    return result, proposal
+
+
 def cmd_show(args, *, open_models, warn) -> int:
-    """``tactrec show DATA --db DB --out view.html``: recognise ``DATA`` (or read ``--result``) and
-    write the page."""
-    from .io.session import is_session_file
+    """``tactrec show DATA --db DB --out view.html [--png still.png]``: recognise ``DATA`` (or read
+    ``--result``) and write the page and its still."""
+    from .io.session import is_session_file, load_session
     from .io.touch import load_touch
     from .recognition import Recognizer
     from .runner import workers_for
-    from .viewer import touch_scene, write_view
+    from .viewer import page, render_still, session_scene, touch_scene, write_view
+    from .viewer.still import chromium
 
-    if is_session_file(args.data):
-        raise InputError("a session file is not drawn yet: give one of its touches", args.data)
-    touch = load_touch(args.data)
+    if args.out is None and args.png is None:
+        raise InputError("give --out HTML, --png PNG or both", "tactrec show")
+    if args.png is not None:
+        chromium()                                       # before any work: one line if there is none
+    is_session = is_session_file(args.data)
+    if args.next and not is_session:
+        raise InputError("--next draws a session's proposed touch: DATA is one touch", args.next)
+    touches = load_session(args.data) if is_session else [load_touch(args.data)]
     result = read_result(args.result, args.data) if args.result else None
     db = open_models(db=args.db, models=args.models, warn=warn, quiet=args.quiet, units=args.units, scale=args.scale)
     models = {e.name: e.model for e in db.entries}
-    if result is None:
+    if is_session:
+        result, proposal = _session(args, touches, db, result)
+    elif result is None:
         with Recognizer(db, method=args.method, workers=workers_for(db)) as recognizer:
-            result = recognizer.recognize(touch).to_json()
+            result = recognizer.recognize(touches[0]).to_json()
     missing = sorted({r["model"] for r in result["ranking"] if r.get("error") is not None} - set(models))
     if missing:
         raise InputError(f"the result names models the database does not hold: {', '.join(missing)}",
                          args.result or args.data)
-    scene = touch_scene(result, touch.curves, models, shown=args.shown, title=Path(args.data).name)
-    write_view(args.out, scene)
-    print(f"wrote {args.out}")
+    title = Path(args.data).name
+    if is_session:
+        scene = session_scene(result, touches, models, proposal=proposal, shown=args.shown, title=title)
+    else:
+        scene = touch_scene(result, touches[0].curves, models, shown=args.shown, title=title)
+    if args.out is not None:
+        write_view(args.out, scene)
+        print(f"wrote {args.out}")
+    if args.png is not None:
+        render_still(page(scene), args.png)
+        print(f"wrote {args.png}")
     return 0
 
 
 def add_show_parser(sub, *, count, mesh_options, methods, default_method):
-    p = sub.add_parser("show", help="draw a touch's recognition in one offline HTML page")
-    p.add_argument("data", metavar="DATA", help="tactile data file (.json or .csv)")
+    p = sub.add_parser("show", help="draw a touch's or a session's recognition in one offline HTML page, "
+                       "or its still")
+    p.add_argument("data", metavar="DATA", help="tactile data file (.json or .csv) or session file")
     p.add_argument("--db", metavar="DB", help="database built by 'tactrec build'")
     p.add_argument("--models", nargs="+", metavar="MODEL", help="model files or built-in names, instead of --db")
-    p.add_argument("--out", required=True, metavar="HTML", help="the page to write")
+    p.add_argument("--out", metavar="HTML", help="the page to write")
+    p.add_argument("--png", metavar="PNG", help="a still of the page's first view (headless Chromium draws it)")
     p.add_argument("--result", metavar="RESULT", help="a result of 'tactrec recognize --json' for DATA, "
                    "drawn instead of recognising DATA again")
+    p.add_argument("--next", metavar="PROPOSAL", help="a session's proposal of 'tactrec next --json', drawn "
+                   "instead of proposing again")
     p.add_argument("--shown", type=count(1), default=5, metavar="N",
                    help="how many registered models, best first, the side panel offers (default 5)")
     p.add_argument("--method", choices=sorted(methods), default=default_method,
                    help=f"registration method (default {default_method})")
+    p.add_argument("--seed", type=count(0), default=0, help="the proposal's seed, for a session (default 0)")
     mesh_options(p)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     return p

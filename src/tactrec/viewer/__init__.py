@@ -2,7 +2,9 @@
 
 :func:`~tactrec.viewer.scene.touch_scene` turns a result into plain arrays (a
 *scene*); :func:`~tactrec.viewer.page.page` turns a scene into a self-contained
-page; :func:`write_view` writes it atomically.
+page; :func:`write_view` writes it atomically.  :func:`~tactrec.viewer.session.session_scene`
+is a session's scene (every touch, the proposed next one);
+:func:`~tactrec.viewer.still.render_still` renders a page's still in a headless browser.
 """
 
 from __future__ import annotations
@@ -10,8 +12,10 @@ from __future__ import annotations
 from ..io.atomic import write_text_atomic
 from .page import page
 from .scene import touch_scene
+from .session import session_scene
+from .still import render_still
 
-__all__ = ["touch_scene", "page", "write_view"]
+__all__ = ["touch_scene", "session_scene", "page", "write_view", "render_still"]
 
 
 def write_view(path, scene: dict) -> None:

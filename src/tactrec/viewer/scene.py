@@ -18,10 +18,12 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["touch_scene", "surface_mesh", "tube"]
+__all__ = ["touch_scene", "surface_mesh", "tube", "view", "placed", "pose_of", "others", "COLOURS"]
 
 SIDES = 8            # a tube's cross-section: an octagon
 TUBE = 0.006         # a tube's radius, of the view's size (its bounding box's diagonal)
+#: a touch's curves, one colour each (a session's touches, one colour each)
+COLOURS = ["#d62728", "#1f77b4", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b", "#e377c2", "#17becf"]
 
 
 def surface_mesh(model, *, faces: int) -> tuple[np.ndarray, np.ndarray, int]:
@@ -83,6 +85,91 @@ def _rounded(x: np.ndarray, size: float) -> list:
     return np.round(np.asarray(x, float), digits).tolist()
 
 
+def pose_of(entry: dict) -> tuple[np.ndarray, np.ndarray, float]:
+    """A ranking entry's pose ``(R (3, 3), t (3,), scale)``: ``model = scale R data + t``."""
+    return (np.asarray(entry["rotation"], float), np.asarray(entry["translation"], float),
+            float(entry.get("scale", 1.0)))
+
+
+def placed(entry: dict, x: np.ndarray) -> np.ndarray:
+    """Data points ``(..., 3)`` in the model's frame under ``entry``'s pose."""
+    R, t, scale = pose_of(entry)
+    return scale * np.asarray(x, float) @ R.T + t
+
+
+def view(entry: dict, model, *, faces: int, curves: list, normal, marks=(), lines=(), towards=None) -> dict:
+    """One model's view: its surface (at most ``faces`` triangles) and, in its frame, ``curves``
+    (``{"points": (n, 3), "colour", "name", "opacity"}``, drawn as tubes), the contact (the entry's
+    ``location``) and ``normal`` (``(3,)``, drawn 8 % of the view's size long), ``marks``
+    (``{"point": (3,), "name", "colour", "symbol"}``) and ``lines`` (``{"points": (n, 3), "name",
+    "colour", "dash"}``), all already in the model's frame.  The axes' ``range`` holds the surface
+    and the curves drawn opaque, padded by 5 % of the view's size.  The camera looks at the contact along
+    the normal, or at the point ``towards`` (``(3,)``) from the surface's centre's side of it where
+    one is given, from no farther than the surface leaves clear (``clear``, :func:`_clear`)."""
+    vertices, triangles, original = surface_mesh(model, faces=faces)
+    lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+    size = float(np.linalg.norm(hi - lo)) or 1.0
+    drawn = []
+    for c in curves:
+        v, f = tube(c["points"], TUBE * size)
+        drawn.append({"vertices": _rounded(v, size), "triangles": f.tolist(), "colour": c["colour"],
+                      "name": c["name"], "opacity": c.get("opacity", 1.0)})
+    normal = np.asarray(normal, float)
+    # the axes' range: the surface and the curves that fit it (a slipped touch's may lie far off)
+    kept = np.concatenate([vertices] + [np.asarray(c["points"], float) for c in curves if c.get("opacity", 1.0) >= 1.0])
+    pad = 0.05 * size
+    target = np.asarray(entry["location"] if towards is None else towards, float)
+    look = normal if towards is None else target - 0.5 * (lo + hi)
+    look = normal if not np.linalg.norm(look) > 0 else look
+    look = look / np.linalg.norm(look)
+    return {
+        "model": entry["model"], "error": entry["error"], "probability": entry.get("probability"),
+        "units": getattr(model, "units", None) or "",
+        "surface": {"vertices": _rounded(vertices, size), "triangles": triangles.tolist(),
+                    "faces": int(len(triangles)), "original_faces": int(original)},
+        "curves": drawn,
+        "contact": _rounded(entry["location"], size),
+        "normal": _rounded(0.08 * size * normal / (np.linalg.norm(normal) or 1.0), size),
+        "look": _rounded(look, 1.0),
+        "target": _rounded(target, size),
+        "clear": _clear(vertices, triangles, target, look, size),
+        "marks": [dict(m, point=_rounded(m["point"], size)) for m in marks],
+        "lines": [dict(ln, points=_rounded(ln["points"], size)) for ln in lines],
+        "size": size,
+        "range": [_rounded(kept.min(axis=0) - pad, size), _rounded(kept.max(axis=0) + pad, size)],
+    }
+
+
+def _clear(vertices: np.ndarray, triangles: np.ndarray, target: np.ndarray, look: np.ndarray, size: float) -> float:
+    """How far (as a share of ``size``) the line of sight from ``target`` along ``look`` runs before it
+    meets the surface (10 where it meets nothing): the camera stays nearer, so that the inside of a
+    cup or a handle's far side does not hide the touch."""
+    origin = target + 1e-3 * size * look
+    # Moller-Trumbore, the one ray against every triangle
+    a, b, c = (vertices[triangles[:, k]] for k in range(3))
+    e1, e2 = b - a, c - a
+    p = np.cross(look, e2)
+    det = np.einsum("ij,ij->i", e1, p)
+    ok = np.abs(det) > 1e-12 * size * size
+    inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
+    s = origin - a
+    u = np.einsum("ij,ij->i", s, p) * inv
+    q = np.cross(s, e1)
+    v = (q @ look) * inv
+    distance = np.einsum("ij,ij->i", e2, q) * inv
+    hit = ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (distance > 0)
+    far = distance[hit] if hit.any() else np.array([10.0 * size])
+    return float(min(10.0, far.min() / size))
+
+
+def others(result: dict, views: list) -> list:
+    """The ranking's models without a view, and why."""
+    drawn = {v["model"] for v in views}
+    return [{"model": r["model"], "error": r.get("error"), "probability": r.get("probability"),
+             "reason": r.get("rejected") or "registered, beyond the views shown"}
+            for r in result.get("ranking", []) if r["model"] not in drawn]
+
+
 def touch_scene(result: dict, curves: list[np.ndarray], models: dict, *, shown: int = 5,
                 faces: int = 10000, runner_faces: int = 4000, title: str = "") -> dict:
     """The scene of one touch's recognition (see the module text).
@@ -105,28 +192,10 @@ def touch_scene(result: dict, curves: list[np.ndarray], models: dict, *, shown: 
     registered = [r for r in result.get("ranking", []) if r.get("error") is not None][:shown]
     views = []
     for r in registered:
-        model = models[r["model"]]
-        R, t = np.asarray(r["rotation"], float), np.asarray(r["translation"], float)
-        scale = float(r.get("scale", 1.0))
-        placed = [scale * np.asarray(c, float) @ R.T + t for c in curves]
-        vertices, triangles, original = surface_mesh(model, faces=faces if not views else runner_faces)
-        lo, hi = vertices.min(axis=0), vertices.max(axis=0)
-        size = float(np.linalg.norm(hi - lo)) or 1.0
-        tubes = [tube(c, TUBE * size) for c in placed]
-        normal = R @ np.asarray(result.get("normal", [0.0, 0.0, 1.0]), float)
-        views.append({
-            "model": r["model"], "error": r["error"], "probability": r.get("probability"),
-            "units": getattr(model, "units", None) or "",
-            "surface": {"vertices": _rounded(vertices, size), "triangles": triangles.tolist(),
-                        "faces": int(len(triangles)), "original_faces": int(original)},
-            "curves": [{"vertices": _rounded(v, size), "triangles": f.tolist()} for v, f in tubes],
-            "contact": _rounded(r["location"], size),
-            "normal": _rounded(0.08 * size * normal / (np.linalg.norm(normal) or 1.0), size),
-            "size": size,
-        })
-    drawn = {v["model"] for v in views}
-    others = [{"model": r["model"], "error": r.get("error"), "probability": r.get("probability"),
-               "reason": r.get("rejected") or "registered, beyond the views shown"}
-              for r in result.get("ranking", []) if r["model"] not in drawn]
+        R = pose_of(r)[0]
+        drawn = [{"points": placed(r, c), "colour": COLOURS[n % len(COLOURS)], "name": f"curve {n + 1}"}
+                 for n, c in enumerate(curves)]
+        views.append(view(r, models[r["model"]], faces=faces if not views else runner_faces, curves=drawn,
+                          normal=R @ np.asarray(result.get("normal", [0.0, 0.0, 1.0]), float)))
     return {"kind": "touch", "title": title, "best": result.get("best"), "confidence": result.get("confidence"),
-            "unknown": result.get("unknown"), "views": views, "others": others}
+            "unknown": result.get("unknown"), "views": views, "others": others(result, views), "legend": []}
