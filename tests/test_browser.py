@@ -90,7 +90,8 @@ def test_the_page_draws_its_model_offline_without_errors(browser, page_of_a_resu
     assert report["errors"] == [] and report["requests"] == []
     assert report["drawn"]
     assert report["models"] == [r["model"] for r in result["ranking"]]
-    assert 0.05 < model_share(report["pixels"]) < 0.9
+    # the model covers a plausible share (all of it, seen from inside a cup), and the curves show
+    assert 0.05 < model_share(report["pixels"]) < 0.99 and colour_share(report["pixels"]) > 1e-3
 
 
 def test_a_blank_erring_or_fetching_page_fails_the_checks(browser, page_of_a_result, tmp_path):
@@ -106,6 +107,11 @@ def test_a_blank_erring_or_fetching_page_fails_the_checks(browser, page_of_a_res
     assert any("example.invalid" in url for url in visit(browser, fetching)["requests"])
     assert "broken" in visit(browser, erring)["errors"]
     assert model_share(visit(browser, blank)["pixels"]) < 0.01
+
+
+def colour_share(pixels: np.ndarray) -> float:
+    """The share of pixels of a saturated colour (the curves')."""
+    return float((np.ptp(pixels, axis=2) > 0.3).mean())
 
 
 def red_share(pixels: np.ndarray) -> float:
@@ -127,7 +133,7 @@ def test_a_still_shows_the_model_and_its_curves_at_print_size(browser, page_of_a
     render_still(text, png, browser=browser)
     pixels = imread(png)[..., :3]
     assert pixels.shape[:2] == (1200, 1600)
-    assert 0.05 < model_share(pixels) < 0.9
+    assert 0.05 < model_share(pixels) < 0.99
     assert red_share(pixels) > 1e-3
     bare = json.loads(re.search(r'id="scene">(.*?)</script>', text, re.S).group(1).replace("<\\/", "</"))
     for view in bare["views"]:

@@ -309,14 +309,17 @@ def test_paper_method_parabola_reading_estimates_a_sphere_and_reaches_the_benchm
 
 
 def test_bench_help_lists_every_benchmark_with_what_it_measures(capsys):
-    """``tactrec bench --help`` names every benchmark with one line, and each name runs a function."""
+    """``tactrec bench --help`` names every benchmark with one line, and each name runs a function; then
+    ``report``."""
     from tactrec.bench import BENCHMARKS
 
     with pytest.raises(SystemExit) as exit_:
         main(["bench", "--help"])
     assert exit_.value.code == 0
-    listing = capsys.readouterr().out.split("benchmarks:\n", 1)[1].splitlines()
+    listing, report = capsys.readouterr().out.split("benchmarks:\n", 1)[1].split("\n\n")
+    listing = listing.splitlines()
     assert [line.split()[0] for line in listing] == list(BENCHMARKS)
+    assert report.split()[0] == "report" and "HTML" in report
     for line, (name, benchmark) in zip(listing, BENCHMARKS.items()):
         assert line.split(None, 1)[1] == benchmark.summary and benchmark.summary
         assert callable(benchmark.run), name

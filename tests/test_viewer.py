@@ -65,7 +65,7 @@ def test_each_view_places_the_curves_by_its_own_models_pose(scans):
 
 @pytest.mark.slow
 def test_show_writes_one_offline_page_of_the_result(tmp_path, capsys):
-    """``tactrec show`` on a touch against the ten Fig. 11 scans: one page under 8 MB, plotly.js inlined
+    """``tactrec show`` on a touch against the ten Fig. 11 scans: one page under 8 MB, three.js inlined with its licence
     (no script, stylesheet or image fetched from anywhere), the scene listing the ranking's models;
     ``--result`` draws a saved result without recognising again."""
     touch = tmp_path / "touch.json"
@@ -76,7 +76,7 @@ def test_show_writes_one_offline_page_of_the_result(tmp_path, capsys):
     assert main(["show", str(touch), "--models", *models, "--out", str(out), "--quiet"]) == 0
     text = out.read_text(encoding="utf-8")
     assert out.stat().st_size <= 8e6
-    assert "Licensed under the MIT license" in text and "Plotly" in text
+    assert "three.js authors" in text and "Permission is hereby granted" in text
     assert not re.search(r"<(script|link|img|iframe)[^>]+(src|href)\s*=", text)
     scene = json.loads(re.search(r'<script type="application/json" id="scene">(.*?)</script>', text,
                                  re.S).group(1).replace("<\\/", "</"))
@@ -261,3 +261,17 @@ def test_show_draws_a_session_and_its_saved_result_and_proposal_alike(tmp_path, 
         err = capsys.readouterr().err.strip()
         assert len(err.splitlines()) == 1 and words in err, err
     assert not (tmp_path / "b.html").exists()
+
+
+def test_the_inlined_library_is_the_published_file_with_its_licence(monkeypatch):
+    """The page carries three.js's licence before the library; a vendored file that is not the published
+    one (its SHA-256 differs) is refused, not inlined."""
+    import importlib
+
+    page_module = importlib.import_module("tactrec.viewer.page")
+
+    text = page_module.library()
+    assert text.index("Permission is hereby granted") < text.index("class OrbitControls")
+    monkeypatch.setitem(page_module.VENDOR, "three.min.js", "0" * 64)
+    with pytest.raises(RuntimeError, match="three.min.js"):
+        page_module.library()

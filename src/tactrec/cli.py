@@ -329,7 +329,9 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("bench", help="run a reproduction or benchmark (paper-table2, paper-table3, ...)",
                        formatter_class=argparse.RawDescriptionHelpFormatter,
                        epilog="benchmarks:\n" + "\n".join(f"  {name:<{width}}  {b.summary}"
-                                                            for name, b in BENCHMARKS.items()))
+                                                            for name, b in BENCHMARKS.items())
+                       + f"\n\n  {'report':<{width}}  one offline HTML page of every benchmark's latest table and "
+                         "plots in --out")
     p.add_argument("name", metavar="NAME", help="benchmark name (listed below)")
     p.add_argument("--instances", type=_count(1), default=10, help="instances per model (default 10)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
@@ -367,6 +369,7 @@ def main(argv=None) -> int:
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
+        args.argv = list(sys.argv[1:] if argv is None else argv)          # as typed: a benchmark records it
         return args.func(args)
     except InputError as exc:
         print(f"tactrec: {exc}", file=sys.stderr)

@@ -28,10 +28,17 @@ SCAN_KINDS = {**{name: ("shipped", "paper-like") for name in ("paper-fig11", "pa
 
 
 def cmd_bench(args) -> int:
-    from .bench import BENCHMARKS
+    import shlex
 
+    from .bench import BENCHMARKS
+    from .bench.report import record_run, write_report
+
+    if args.name == "report":
+        written = write_report(Path(args.out) if args.out else Path("bench-out"))
+        print(f"wrote {written}")
+        return 0
     if args.name not in BENCHMARKS:
-        raise InputError(f"unknown benchmark; available: {', '.join(sorted(BENCHMARKS))}", args.name)
+        raise InputError(f"unknown benchmark; available: {', '.join(sorted(BENCHMARKS))} (and report)", args.name)
     out = Path(args.out) if args.out else Path("bench-out")
     extra = {}
     if args.scans is not None:
@@ -87,5 +94,7 @@ def cmd_bench(args) -> int:
                                   quiet=args.quiet, method=args.method, **extra)
     print(table["text"])
     written = out / (table.get("benchmark", args.name) + ".json")
+    record_run(written, command=shlex.join(["tactrec", *getattr(args, "argv", ["bench", args.name])]),
+               text=table["text"], plots=table.get("plots", []))
     print(f"wrote {written}" + "".join(f", {p}" for p in table.get("plots", [])))
     return 0

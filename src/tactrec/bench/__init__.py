@@ -52,4 +52,5 @@ BENCHMARKS: dict[str, Benchmark] = {
     "open-world": Benchmark("open_world", "run", "touches and sessions of scans left out of the database"),
     "serve": Benchmark("serve", "run", "what a request to tactrec serve costs beyond its recognition"),
     "sensor": Benchmark("sensor", "run", "touches as sensors record them: tip, outliers, miss, spacing, jitter"),
+    "viewer": Benchmark("viewer", "run", "tactrec show's page: its size, and the time a browser takes to draw it"),
 }

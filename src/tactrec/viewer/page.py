@@ -1,24 +1,34 @@
 """One self-contained HTML page for a scene (:mod:`tactrec.viewer.scene`, :mod:`tactrec.viewer.session`).
 
-The page inlines plotly.js (from the ``plotly`` package, MIT licence; its
-licence header is kept) and the scene as JSON: it makes no network request
-when opened.  A side panel lists the scene's models with their errors and
-probabilities; choosing one shows its surface and the curves as that model's
-registration places them; below, a session's touches and proposed touch with
-their colours.  Each view's axes are equal, over the view's ``range``; the camera
-looks at the touch from no farther than the surface leaves clear.  Opened with
-``#still`` the page draws the first view alone, a touch's curves red and its
-contact a white dot (the paper's Fig. 14), for :mod:`tactrec.viewer.still`.  The
-page sets ``document.body.dataset.drawn`` once the first view is drawn, for a
-headless browser to wait on.
+The page inlines three.js and its OrbitControls (``vendor/``: ``build/three.min.js`` and
+``examples/js/controls/OrbitControls.js`` of the npm package ``three`` 0.147.0, MIT licence, whose
+text the page carries) and the scene as JSON: it makes no network request when opened.  A side
+panel lists the scene's models with their errors and probabilities; choosing one shows its surface
+and the curves as that model's registration places them; below, a session's touches and proposed
+touch with their colours.  The view is drawn in true proportions (equal axes), over a grid of round
+squares (the note says their side); the camera looks at the touch along its normal (a session:
+from its touches' side) from no farther than the surface leaves clear, and can be turned (drag),
+zoomed (wheel) and moved (right drag).  Opened with ``#still`` the page draws the first view alone
+with its caption, a touch's curves red and its contact a white dot (the paper's Fig. 14), for
+:mod:`tactrec.viewer.still`.  The page sets ``document.body.dataset.drawn`` once the first view is
+drawn, for a headless browser to wait on (and ``drawnMs``, the time since its navigation began).
 """
 
 from __future__ import annotations
 
+import hashlib
 import html
 import json
+from importlib import resources
 
-__all__ = ["page"]
+__all__ = ["page", "VENDOR", "library"]
+
+#: the inlined files and their SHA-256, as published in the npm package ``three`` 0.147.0
+VENDOR = {
+    "three.min.js": "f34446bf875b5fb0dcd93819ffe1d9e182d46634ee855f5d904c6c4ac7cdbc95",
+    "OrbitControls.js": "b4c6e53f98538535b11fd6655627d47fb5877b3ad972568bff0a7026c4b6d5c4",
+    "three-LICENSE": "fbf3943930dacbf56aabb8dc5d816440bd16aa6f4cc78ddbdf12106ee1807832",
+}
 
 _SCRIPT = """
 const scene = JSON.parse(document.getElementById('scene').textContent);
@@ -28,67 +38,106 @@ function fmt(x) {
   if (x === null || x === undefined) { return '-'; }
   return (x !== 0 && Math.abs(x) < 1e-3) ? Number(x).toExponential(1) : Number(x).toPrecision(3);
 }
-let light = {x: 1e5, y: 1e5, z: 1e5};
-function mesh(part, colour, name, opacity) {
-  const v = part.vertices, f = part.triangles;
-  return {type: 'mesh3d', name: name, x: v.map(p => p[0]), y: v.map(p => p[1]), z: v.map(p => p[2]),
-          i: f.map(t => t[0]), j: f.map(t => t[1]), k: f.map(t => t[2]), color: colour, opacity: opacity,
-          flatshading: false, lighting: {ambient: 0.6, diffuse: 0.65, specular: 0.1}, lightposition: light, hoverinfo: 'name',
-          showlegend: false};
+const plot = document.getElementById('plot');
+const renderer = new THREE.WebGLRenderer({antialias: true, preserveDrawingBuffer: true});
+renderer.setPixelRatio(window.devicePixelRatio);
+renderer.setClearColor(0xffffff, 1);
+plot.appendChild(renderer.domElement);
+const world = new THREE.Scene();
+const camera = new THREE.PerspectiveCamera(30, 1, 0.01, 1000);
+const headlight = new THREE.DirectionalLight(0xffffff, 0.65);     // from behind the viewer, above
+headlight.position.set(0.3, 0.6, 1.0);
+camera.add(headlight);
+world.add(camera);
+world.add(new THREE.AmbientLight(0xffffff, 0.4));
+const controls = new THREE.OrbitControls(camera, renderer.domElement);
+controls.addEventListener('change', render);
+let shown = null;
+function render() { renderer.render(world, camera); }
+function resize() {
+  const w = plot.clientWidth, h = plot.clientHeight;
+  renderer.setSize(w, h);
+  camera.aspect = w / h;
+  camera.updateProjectionMatrix();
+  render();
 }
-function line(points, name, colour, width, dash) {
-  return {type: 'scatter3d', mode: 'lines', name: name, x: points.map(p => p[0]), y: points.map(p => p[1]),
-          z: points.map(p => p[2]), line: {width: width, color: colour, dash: dash || 'solid'}, hoverinfo: 'name',
-          showlegend: false};
+window.addEventListener('resize', resize);
+function geometry(part) {
+  const g = new THREE.BufferGeometry();
+  g.setAttribute('position', new THREE.Float32BufferAttribute(part.vertices.flat(), 3));
+  g.setIndex(part.triangles.flat());
+  g.computeVertexNormals();
+  return g;
 }
-function traces(view) {
-  const out = [mesh(view.surface, '#c8c8c8', view.model, 1.0)];
-  // Fig. 14: a touch's registered curves in red; a session's touches keep their colours
-  const red = still && scene.kind === 'touch';
-  view.curves.forEach((c) => out.push(mesh(c, red ? '#d62728' : c.colour, c.name, c.opacity)));
-  (view.lines || []).forEach((l) => out.push(line(l.points, l.name, l.colour, 7, l.dash)));
-  (view.marks || []).forEach((m) => out.push({type: 'scatter3d', mode: 'markers', name: m.name, x: [m.point[0]],
-      y: [m.point[1]], z: [m.point[2]], marker: {size: 5, color: m.colour, symbol: m.symbol}, hoverinfo: 'name',
-      showlegend: false}));
-  const p = view.contact, d = view.normal;
-  out.push({type: 'scatter3d', mode: 'markers', x: [p[0]], y: [p[1]], z: [p[2]], name: 'contact',
-            marker: {size: still ? 9 : 5, color: still ? '#ffffff' : '#000000', line: {color: '#000000', width: 2}},
-            showlegend: false});
-  out.push(line([p, [p[0] + d[0], p[1] + d[1], p[2] + d[2]]], 'normal', '#000000', 6));
-  return out;
+function solid(g, colour, opacity) {
+  const o = opacity === undefined ? 1 : opacity;
+  return new THREE.Mesh(g, new THREE.MeshPhongMaterial({color: colour, shininess: 15, side: THREE.DoubleSide,
+                                                         transparent: o < 1, opacity: o}));
 }
-function axis(name) {
-  return {title: {text: name}, showbackground: !still, gridcolor: '#e4e4e4', zerolinecolor: '#bbbbbb'};
+function dot(point, radius, colour, symbol) {
+  const g = symbol === 'circle' ? new THREE.SphereGeometry(radius, 16, 12) : new THREE.OctahedronGeometry(1.4 * radius);
+  const m = solid(g, colour);
+  m.position.set(point[0], point[1], point[2]);
+  return m;
 }
-const layout = {margin: {l: 0, r: 0, t: 0, b: 0}, paper_bgcolor: '#ffffff',
-                scene: {xaxis: axis('x'), yaxis: axis('y'), zaxis: axis('z')}};
-const config = {displaylogo: false, responsive: true, modeBarButtonsToRemove: ['toImage']};
+function niceStep(x) {          // 1, 2 or 5 times a power of ten, about x
+  const p = Math.pow(10, Math.floor(Math.log10(x))), f = x / p;
+  return p * (f < 1.5 ? 1 : f < 3.5 ? 2 : f < 7.5 ? 5 : 10);
+}
+function build(view) {
+  const group = new THREE.Group();
+  group.add(solid(geometry(view.surface), 0xb4b4b4));
+  const red = still && scene.kind === 'touch';          // Fig. 14: a touch's registered curves in red
+  view.curves.forEach((c) => group.add(solid(geometry(c), red ? '#d62728' : c.colour, c.opacity)));
+  (view.lines || []).forEach((l) => group.add(solid(geometry(l), l.colour)));
+  (view.marks || []).forEach((m) => group.add(dot(m.point, 0.01 * view.size, m.colour, m.symbol)));
+  group.add(dot(view.contact, (still ? 0.012 : 0.008) * view.size, still ? '#ffffff' : '#000000', 'circle'));
+  return group;
+}
+function grid(view, up) {         // round squares under the model, across the up direction
+  const lo = view.range[0], hi = view.range[1], step = niceStep(view.size / 10);
+  const k = up.z > 0.5 ? 2 : 1, across = [0, 1, 2].filter(i => i !== k);
+  const cells = 2 * Math.ceil(Math.max(...across.map(i => hi[i] - lo[i])) / 2 / step) + 2;
+  const g = new THREE.GridHelper(cells * step, cells, 0xcccccc, 0xe6e6e6);
+  if (k === 2) { g.rotation.x = Math.PI / 2; }
+  const at = [0, 1, 2].map(i => i === k ? lo[i] : 0.5 * (lo[i] + hi[i]));
+  g.position.set(at[0], at[1], at[2]);
+  return [g, step];
+}
 function show(index) {
   const view = scene.views[index];
   document.querySelectorAll('#models li').forEach((li, n) => li.classList.toggle('chosen', n === index));
-  const s = view.surface;
-  document.getElementById('note').textContent = s.faces < s.original_faces
-    ? view.model + ': drawn with ' + s.faces + ' of its ' + s.original_faces + ' triangles (decimated for display)'
-    : view.model + ': ' + s.faces + ' triangles';
-  // equal axes over the view's range (the surface and the curves that fit it)
-  const lo = view.range[0], hi = view.range[1], ext = [0, 1, 2].map(k => hi[k] - lo[k]), big = Math.max(...ext);
-  ['xaxis', 'yaxis', 'zaxis'].forEach((a, k) => { layout.scene[a].range = [lo[k], hi[k]]; });
-  layout.scene.aspectmode = 'manual';
-  layout.scene.aspectratio = {x: ext[0] / big, y: ext[1] / big, z: ext[2] / big};
-  // the camera looks at the touch along its normal (a session: from its touches' side), no farther
-  // than the surface leaves clear; plotly's camera is in units of the box's largest side
-  const d = view.look, t = view.target, up = Math.abs(d[2]) > 0.9 ? {x: 0, y: 1, z: 0} : {x: 0, y: 0, z: 1};
-  const centre = [0, 1, 2].map(k => (t[k] - 0.5 * (lo[k] + hi[k])) / big);
-  const far = Math.min(still ? 1.6 : 2.0, 0.9 * view.clear * view.size / big);
-  const eye = {x: centre[0] + far * d[0], y: centre[1] + far * d[1], z: centre[2] + far * d[2]};
-  layout.scene.camera = {eye: eye, up: up, center: {x: centre[0], y: centre[1], z: centre[2]}};
-  light = {x: 1e5 * (d[0] + up.x), y: 1e5 * (d[1] + up.y), z: 1e5 * (d[2] + up.z)};      // from behind the viewer, above
-  if (still) {
-    layout.margin.t = 40;
-    layout.title = {text: view.model + ': error ' + fmt(view.error) + ' ' + view.units + ', probability '
-                    + fmt(view.probability), x: 0.5, font: {size: 20}};
+  if (shown) {
+    world.remove(shown);
+    shown.traverse((o) => { if (o.geometry) { o.geometry.dispose(); } if (o.material) { o.material.dispose(); } });
   }
-  Plotly.react('plot', traces(view), layout, config).then(() => { document.body.dataset.drawn = 'yes'; });
+  const d = new THREE.Vector3(...view.look).normalize(), t = new THREE.Vector3(...view.target);
+  const up = Math.abs(d.z) > 0.9 ? new THREE.Vector3(0, 1, 0) : new THREE.Vector3(0, 0, 1);
+  shown = build(view);
+  const [g, step] = grid(view, up);
+  shown.add(g);
+  world.add(shown);
+  const s = view.surface, units = view.units ? ' ' + view.units : '';
+  document.getElementById('note').textContent = (s.faces < s.original_faces
+    ? view.model + ': drawn with ' + s.faces + ' of its ' + s.original_faces + ' triangles (decimated for display)'
+    : view.model + ': ' + s.faces + ' triangles') + '; grid squares ' + step + units;
+  document.getElementById('caption').textContent = view.model + ': error ' + fmt(view.error) + units
+    + ', probability ' + fmt(view.probability) + '; grid squares ' + step + units;
+  // the whole model in the frame, unless the surface is nearer along the line of sight
+  const fit = 0.5 * view.size / Math.sin(Math.PI * camera.fov / 360) * (still ? 0.8 : 1.0);
+  const far = Math.min(fit, 0.9 * view.clear * view.size);
+  camera.up.copy(up);
+  camera.position.copy(t).addScaledVector(d, far);
+  camera.near = far / 100;
+  camera.far = far + 4 * view.size;
+  controls.target.copy(t);
+  controls.update();
+  resize();
+  requestAnimationFrame(drawn);
+}
+function drawn() {          // once drawn: the time since the page's navigation began, for a benchmark
+  if (!document.body.dataset.drawn) { document.body.dataset.drawnMs = performance.now().toFixed(1); }
+  document.body.dataset.drawn = 'yes';
 }
 const list = document.getElementById('models');
 scene.views.forEach((view, n) => {
@@ -117,13 +166,14 @@ const legend = document.getElementById('legend');
   li.appendChild(document.createTextNode(entry.name));
   legend.appendChild(li);
 });
-if (scene.views.length) { show(0); } else { document.body.dataset.drawn = 'yes'; }
+if (scene.views.length) { show(0); } else { drawn(); }
 """
 
 _STYLE = """
 body { margin: 0; font: 14px sans-serif; display: flex; height: 100vh; }
 #side { width: 340px; flex: none; padding: 12px; overflow-y: auto; border-right: 1px solid #ddd; box-sizing: border-box; }
-#plot { flex: 1; }
+#plot { flex: 1; position: relative; overflow: hidden; }
+#caption { display: none; position: absolute; top: 10px; width: 100%; text-align: center; font-size: 22px; }
 #models { list-style: none; padding: 0; }
 #models li { padding: 5px; cursor: pointer; border-radius: 4px; white-space: pre; overflow: hidden; text-overflow: ellipsis; font-size: 13px; }
 #models li.chosen { background: #e8eef8; font-weight: bold; }
@@ -132,13 +182,27 @@ body { margin: 0; font: 14px sans-serif; display: flex; height: 100vh; }
 #legend { list-style: none; padding: 0; font-size: 13px; }
 .swatch { display: inline-block; width: 12px; height: 12px; margin-right: 6px; border-radius: 2px; }
 body.still #side { display: none; }
+body.still #caption { display: block; }
 """
+
+
+def library() -> str:
+    """The inlined JavaScript: three.js, then its OrbitControls (the licence's text before them)."""
+    folder = resources.files("tactrec.viewer") / "vendor"
+    parts = {}
+    for name, digest in VENDOR.items():
+        data = (folder / name).read_bytes()
+        if hashlib.sha256(data).hexdigest() != digest:
+            raise RuntimeError(f"the viewer's {name} is not the published file (SHA-256 differs): reinstall tactrec")
+        parts[name] = data.decode("utf-8")
+    notice = parts["three-LICENSE"].replace("*/", "* /")
+    return (f"/* three.js 0.147.0 (npm package 'three'): build/three.min.js and\n"
+            f"   examples/js/controls/OrbitControls.js, under this licence:\n\n{notice}\n*/\n"
+            f"{parts['three.min.js']}\n{parts['OrbitControls.js']}")
 
 
 def page(scene: dict) -> str:
     """The HTML text of one self-contained page drawing ``scene``."""
-    import plotly.offline
-
     payload = json.dumps(scene, separators=(",", ":"), allow_nan=False).replace("</", "<\\/")
     heading = scene.get("title") or "tactrec"
     summary = ""
@@ -148,11 +212,12 @@ def page(scene: dict) -> str:
     return (
         "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
         f"<title>{html.escape(heading)}</title><style>{_STYLE}</style>"
-        f"<script>{plotly.offline.get_plotlyjs()}</script></head>\n<body>"
+        f"<script>{library()}</script></head>\n<body>"
         f"<div id=\"side\"><h3>{html.escape(heading)}</h3><p>{summary}</p>"
         "<p>Models (choose one to see its registration; grey: none to show, hover for why):</p><ul id=\"models\"></ul>"
-        "<ul id=\"legend\"></ul><p id=\"note\"></p></div>"
-        "<div id=\"plot\"></div>"
+        "<ul id=\"legend\"></ul><p id=\"note\"></p>"
+        "<p id=\"help\">Drag to turn, wheel to zoom, right-drag to move.</p></div>"
+        "<div id=\"plot\"><div id=\"caption\"></div></div>"
         f"<script type=\"application/json\" id=\"scene\">{payload}</script>"
         f"<script>{_SCRIPT}</script></body></html>\n"
     )

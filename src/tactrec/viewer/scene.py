@@ -101,8 +101,9 @@ def view(entry: dict, model, *, faces: int, curves: list, normal, marks=(), line
     """One model's view: its surface (at most ``faces`` triangles) and, in its frame, ``curves``
     (``{"points": (n, 3), "colour", "name", "opacity"}``, drawn as tubes), the contact (the entry's
     ``location``) and ``normal`` (``(3,)``, drawn 8 % of the view's size long), ``marks``
-    (``{"point": (3,), "name", "colour", "symbol"}``) and ``lines`` (``{"points": (n, 3), "name",
-    "colour", "dash"}``), all already in the model's frame.  The axes' ``range`` holds the surface
+    (``{"point": (3,), "name", "colour", "symbol"}``: ``circle``, ``x`` or ``diamond``) and ``lines``
+    (``{"points": (n, 3), "name", "colour"}``, drawn as tubes half as thick as the curves'), all
+    already in the model's frame.  The axes' ``range`` holds the surface
     and the curves drawn opaque, padded by 5 % of the view's size.  The camera looks at the contact along
     the normal, or at the point ``towards`` (``(3,)``) from the surface's centre's side of it where
     one is given, from no farther than the surface leaves clear (``clear``, :func:`_clear`)."""
@@ -111,10 +112,11 @@ def view(entry: dict, model, *, faces: int, curves: list, normal, marks=(), line
     size = float(np.linalg.norm(hi - lo)) or 1.0
     drawn = []
     for c in curves:
-        v, f = tube(c["points"], TUBE * size)
-        drawn.append({"vertices": _rounded(v, size), "triangles": f.tolist(), "colour": c["colour"],
-                      "name": c["name"], "opacity": c.get("opacity", 1.0)})
+        drawn.append(dict(_tube(c["points"], TUBE * size, size), colour=c["colour"], name=c["name"],
+                          opacity=c.get("opacity", 1.0)))
     normal = np.asarray(normal, float)
+    contact = np.asarray(entry["location"], float)
+    arrow = 0.08 * size * normal / (np.linalg.norm(normal) or 1.0)
     # the axes' range: the surface and the curves that fit it (a slipped touch's may lie far off)
     kept = np.concatenate([vertices] + [np.asarray(c["points"], float) for c in curves if c.get("opacity", 1.0) >= 1.0])
     pad = 0.05 * size
@@ -129,15 +131,22 @@ def view(entry: dict, model, *, faces: int, curves: list, normal, marks=(), line
                     "faces": int(len(triangles)), "original_faces": int(original)},
         "curves": drawn,
         "contact": _rounded(entry["location"], size),
-        "normal": _rounded(0.08 * size * normal / (np.linalg.norm(normal) or 1.0), size),
+        "normal": _rounded(arrow, size),
         "look": _rounded(look, 1.0),
         "target": _rounded(target, size),
         "clear": _clear(vertices, triangles, target, look, size),
+        "normal_tube": _tube(np.stack([contact, contact + arrow]), 0.5 * TUBE * size, size),
         "marks": [dict(m, point=_rounded(m["point"], size)) for m in marks],
-        "lines": [dict(ln, points=_rounded(ln["points"], size)) for ln in lines],
+        "lines": [dict(_tube(ln["points"], 0.5 * TUBE * size, size), name=ln["name"], colour=ln["colour"])
+                  for ln in lines],
         "size": size,
         "range": [_rounded(kept.min(axis=0) - pad, size), _rounded(kept.max(axis=0) + pad, size)],
     }
+
+
+def _tube(points, radius: float, size: float) -> dict:
+    v, f = tube(np.asarray(points, float), radius)
+    return {"vertices": _rounded(v, size), "triangles": f.tolist()}
 
 
 def _clear(vertices: np.ndarray, triangles: np.ndarray, target: np.ndarray, look: np.ndarray, size: float) -> float:

@@ -4,7 +4,7 @@ A session's result (:meth:`tactrec.session.result.SessionResult.to_json`) gives 
 pose of the *world* (``model = scale R world + t``); each view draws every touch's curves (mapped
 from its sensor into the world by its ``sensor2world``, then onto the model) in the touch's
 colour, the touches the session calls *slipped* faded and their meeting point crossed, the lines
-that met nothing dashed grey, and the proposed next touch (:meth:`tactrec.proposal.Proposal.to_json`,
+that met nothing grey, and the proposed next touch (:meth:`tactrec.proposal.Proposal.to_json`,
 world frame) in magenta: its approach line, its contact, and its curves as that view's
 hypothesis predicts them (:func:`tactrec.proposal.predict.predicted`; straight chords where that
 surface will not take them).
@@ -95,15 +95,13 @@ def session_scene(result: dict, touches: list, models: dict, *, proposal: dict |
                           "symbol": "x" if faded else "circle"})
         for k, line in enumerate(misses):
             ends = np.stack([line.start, line.start + line.length * line.direction])
-            lines.append({"points": placed(r, ends), "name": f"line {k + 1}: met nothing", "colour": MISSED_COLOUR,
-                          "dash": "dash"})
+            lines.append({"points": placed(r, ends), "name": f"line {k + 1}: met nothing", "colour": MISSED_COLOUR})
         if proposed is not None:
             a = proposed.get("approach")
             if a is not None:
                 start, direction = np.asarray(a["start"], float), np.asarray(a["direction"], float)
                 ends = np.stack([start, start + float(a["length"]) * direction])
-                lines.append({"points": placed(r, ends), "name": "next: approach", "colour": NEXT_COLOUR,
-                              "dash": "solid"})
+                lines.append({"points": placed(r, ends), "name": "next: approach", "colour": NEXT_COLOUR})
             length = float(np.median(lengths)) if lengths else 1.0
             curves += [{"points": c, "name": f"next: curve {i + 1}", "colour": NEXT_COLOUR}
                        for i, c in enumerate(_proposed_curves(model, r, proposed, length))]
