@@ -275,3 +275,17 @@ def test_the_inlined_library_is_the_published_file_with_its_licence(monkeypatch)
     monkeypatch.setitem(page_module.VENDOR, "three.min.js", "0" * 64)
     with pytest.raises(RuntimeError, match="three.min.js"):
         page_module.library()
+
+
+def test_a_still_without_a_browser_is_one_line_before_any_work(tmp_path, capsys, monkeypatch):
+    """``--png`` where no Chromium is found (``TACTREC_CHROMIUM`` naming none): one line naming what to
+    install, exit status 2, nothing written."""
+    touch = tmp_path / "touch.json"
+    assert main(["simulate", "sphere-33", "--out", str(touch), "--uv", "0.5,0.5", "--seed", "1", "--quiet"]) == 0
+    monkeypatch.setenv("TACTREC_CHROMIUM", "no-such-browser")
+    capsys.readouterr()
+    assert main(["show", str(touch), "--models", "sphere-33", "--png", str(tmp_path / "s.png"),
+                 "--out", str(tmp_path / "v.html")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--png" in err and "chromium" in err
+    assert not (tmp_path / "s.png").exists() and not (tmp_path / "v.html").exists()

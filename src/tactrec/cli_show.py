@@ -100,12 +100,12 @@ def cmd_show(args, *, open_models, warn) -> int:
     from .recognition import Recognizer
     from .runner import workers_for
     from .viewer import page, render_still, session_scene, touch_scene, write_view
-    from .viewer.still import chromium
+    from .viewer.still import check_still
 
     if args.out is None and args.png is None:
         raise InputError("give --out HTML, --png PNG or both", "tactrec show")
     if args.png is not None:
-        chromium()                                       # before any work: one line if there is none
+        check_still()                                    # before any work: one line if no browser can draw it
     is_session = is_session_file(args.data)
     if args.next and not is_session:
         raise InputError("--next draws a session's proposed touch: DATA is one touch", args.next)

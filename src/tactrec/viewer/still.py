@@ -17,7 +17,7 @@ from pathlib import Path
 from ..errors import InputError
 from ..io.atomic import write_bytes_atomic
 
-__all__ = ["chromium", "browser", "render_still", "ARGS", "WIDTH", "HEIGHT"]
+__all__ = ["chromium", "browser", "render_still", "check_still", "ARGS", "WIDTH", "HEIGHT"]
 
 #: headless Chromium's switches: WebGL on SwiftShader (no GPU needed)
 ARGS = ("--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader")
@@ -47,6 +47,12 @@ def _playwright():
     except ImportError:
         raise InputError("needs Playwright to drive the browser: pip install 'tactrec[still]'", "--png") from None
     return sync_playwright
+
+
+def check_still() -> None:
+    """One :class:`~tactrec.errors.InputError` line, before any work, if a still cannot be made here."""
+    _playwright()
+    chromium()
 
 
 def render_still(html: str, png, *, width: int = WIDTH, height: int = HEIGHT, timeout: float = 60.0,
