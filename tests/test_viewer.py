@@ -65,35 +65,34 @@ def test_each_view_places_the_curves_by_its_own_models_pose(scans):
 
 @pytest.mark.slow
 def test_show_writes_one_offline_page_of_the_result(tmp_path, capsys):
-    """``tactrec show`` on a touch against the ten Fig. 11 scans: one page under 8 MB, three.js inlined with its licence
-    (no script, stylesheet or image fetched from anywhere), the scene listing the ranking's models;
-    ``--result`` draws a saved result without recognising again."""
+    """``tactrec show`` on a touch against the ten Fig. 11 scans (a database built once): one page under
+    8 MB, three.js inlined with its licence (no script, stylesheet or image fetched from anywhere), the
+    scene listing the ranking's models; ``--result`` draws a saved result without recognising again."""
     touch = tmp_path / "touch.json"
     assert main(["simulate", "mug", "--out", str(touch), "--vertex", "700", "--seed", "3", "--quiet"]) == 0
     models = ["apple", "banana", "bleach_cleanser", "hammer", "mug", "mustard_bottle", "pear", "pitcher_base",
               "power_drill", "strawberry"]
+    db = tmp_path / "db"
+    assert main(["build", *models, "--out", str(db), "--quiet"]) == 0
     out = tmp_path / "view.html"
-    assert main(["show", str(touch), "--models", *models, "--out", str(out), "--quiet"]) == 0
+    assert main(["show", str(touch), "--db", str(db), "--out", str(out), "--quiet"]) == 0
     text = out.read_text(encoding="utf-8")
     assert out.stat().st_size <= 8e6
     assert "three.js authors" in text and "Permission is hereby granted" in text
     assert not re.search(r"<(script|link|img|iframe)[^>]+(src|href)\s*=", text)
-    scene = json.loads(re.search(r'<script type="application/json" id="scene">(.*?)</script>', text,
-                                 re.S).group(1).replace("<\\/", "</"))
+    scene = _scene_of(out)
     assert scene["best"] == "mug" and scene["views"][0]["model"] == "mug"
     # the side panel lists every model: a view for each registered one (up to 5), why not for the rest
     assert sorted([v["model"] for v in scene["views"]] + [o["model"] for o in scene["others"]]) == models
     assert all(o["reason"] for o in scene["others"])
     assert scene["views"][0]["surface"]["faces"] <= 10000
     capsys.readouterr()
-    assert main(["recognize", str(touch), "--models", *models, "--json"]) == 0
+    assert main(["recognize", str(touch), "--db", str(db), "--json"]) == 0
     saved = tmp_path / "result.json"
     saved.write_text(capsys.readouterr().out, encoding="utf-8")
     again = tmp_path / "again.html"
-    assert main(["show", str(touch), "--models", "mug", "banana", "apple", "pear", "strawberry", "hammer",
-                 "bleach_cleanser", "mustard_bottle", "pitcher_base", "power_drill", "--result", str(saved),
-                 "--out", str(again), "--quiet"]) == 0
-    assert again.exists()
+    assert main(["show", str(touch), "--db", str(db), "--result", str(saved), "--out", str(again), "--quiet"]) == 0
+    assert _scene_of(again) == scene
 
 
 def test_show_refuses_a_result_it_cannot_draw_in_one_line(tmp_path, capsys):
