@@ -12,7 +12,7 @@ from tactrec.cli import main
 @pytest.fixture(scope="module")
 def folder(tmp_path_factory):
     """paper-table5 (a table with the paper's numbers) and paper-example run into one folder; a field
-    table whose run made a plot; a table from a version that recorded no run."""
+    table whose run made a plot; a table from a version that recorded no run; one whose name is markup."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -30,6 +30,8 @@ def folder(tmp_path_factory):
     (out / "field.json").write_text(json.dumps({"benchmark": "field"}), encoding="utf-8")
     record_run(out / "field.json", command="tactrec bench field", text="a < b & c", plots=[out / "field-errors.png"])
     (out / "serve.json").write_text(json.dumps({"benchmark": "serve", "requests": 1}), encoding="utf-8")
+    odd = {"benchmark": "kernels", "run": {"command": "tactrec bench kernels", "date": "now", "text": "", "plots": None}}
+    (out / "kernels-<i>odd.json").write_text(json.dumps(odd), encoding="utf-8")
     return out
 
 
@@ -52,6 +54,8 @@ def test_the_report_holds_every_table_and_plot_and_names_what_was_not_run(folder
     assert "did not record its command" in text                                   # serve.json, an older run
     assert "<code>tactrec bench sensor</code>" in text                            # not run yet
     assert "http://" not in text and "https://" not in text
+    # a file's name is text, never markup; a run without plots has none
+    assert "<i>odd" not in text and 'id="kernels-&lt;i&gt;odd"' in text
 
 
 def test_the_report_opens_offline_in_a_browser(folder):

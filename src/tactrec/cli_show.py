@@ -20,11 +20,27 @@ def _objects(path) -> list:
     return results
 
 
+def _direction(obj, what: str, source: str):
+    from .io.touch import _vector
+
+    v = _vector(obj, what, source)
+    if not float(v @ v) > 0.0:
+        raise InputError(f"'{what}' has no length", source)
+    return v
+
+
+def _optional_number(result: dict, key: str, source: str) -> None:
+    from .io.touch import number
+
+    if result.get(key) is not None:
+        number(result[key], key, source)
+
+
 def read_result(path, data_path) -> dict:
     """The result for ``data_path`` in a file ``tactrec recognize --json`` wrote (one JSON object a
     line; with several, the line whose ``"file"`` names ``data_path``), validated enough to draw."""
     from .io.session import rigid_pose
-    from .io.touch import _vector
+    from .io.touch import _vector, number
 
     source = str(path)
     try:
@@ -47,6 +63,15 @@ def read_result(path, data_path) -> dict:
             continue
         rigid_pose(entry.get("rotation"), entry.get("translation"), source, f"{entry['model']}'s pose")
         _vector(entry.get("location"), f"{entry['model']}'s location", source)
+        if "scale" in entry and not number(entry["scale"], f"{entry['model']}'s scale", source) > 0:
+            raise InputError(f"'{entry['model']}'s scale' must be positive", source)
+    if result.get("normal") is not None:
+        _direction(result["normal"], "normal", source)
+    for key in ("confidence", "unknown"):
+        _optional_number(result, key, source)
+    slipped = result.get("slipped", [])
+    if not isinstance(slipped, list) or not all(isinstance(k, int) and not isinstance(k, bool) for k in slipped):
+        raise InputError("'slipped' must be a list of touch numbers", source)
     return result
 
 
@@ -67,20 +92,21 @@ def read_proposal(path) -> dict:
     if not isinstance(directions, list) or not directions:
         raise InputError("the proposal has no 'directions'", source)
     for d in directions:
-        _vector(d, "direction", source)
+        _direction(d, "direction", source)
+    _optional_number(proposal, "gain", source)
     if proposal.get("approach") is not None:
         MissedLine.parse(proposal["approach"], source)
     return proposal
 
 
-def _session(args, touches, db, result):
-    """The session's result and proposal: read from ``--result`` and ``--next``, else computed."""
+def _session(args, touches, db, result, proposal):
+    """The session's result and proposal: as read from ``--result`` and ``--next``, else computed (a
+    saved result without ``--next`` is drawn without a proposal)."""
     from .cli_session import recognize_session
     from .recognition import Recognizer
     from .runner import workers_for
     from .service import default_radius
 
-    proposal = read_proposal(args.next) if args.next else None
     if result is not None:
         return result, proposal
     with Recognizer(db, method=args.method, workers=workers_for(db)) as recognizer:
@@ -111,10 +137,11 @@ def cmd_show(args, *, open_models, warn) -> int:
         raise InputError("--next draws a session's proposed touch: DATA is one touch", args.next)
     touches = load_session(args.data) if is_session else [load_touch(args.data)]
     result = read_result(args.result, args.data) if args.result else None
+    proposal = read_proposal(args.next) if args.next else None
     db = open_models(db=args.db, models=args.models, warn=warn, quiet=args.quiet, units=args.units, scale=args.scale)
     models = {e.name: e.model for e in db.entries}
     if is_session:
-        result, proposal = _session(args, touches, db, result)
+        result, proposal = _session(args, touches, db, result, proposal)
     elif result is None:
         with Recognizer(db, method=args.method, workers=workers_for(db)) as recognizer:
             result = recognizer.recognize(touches[0]).to_json()
@@ -127,11 +154,12 @@ def cmd_show(args, *, open_models, warn) -> int:
         scene = session_scene(result, touches, models, proposal=proposal, shown=args.shown, title=title)
     else:
         scene = touch_scene(result, touches[0].curves, models, shown=args.shown, title=title)
+    if args.png is not None:                             # first: a browser that fails leaves nothing written
+        render_still(page(scene), args.png)
     if args.out is not None:
         write_view(args.out, scene)
         print(f"wrote {args.out}")
     if args.png is not None:
-        render_still(page(scene), args.png)
         print(f"wrote {args.png}")
     return 0
 
@@ -147,7 +175,7 @@ def add_show_parser(sub, *, count, mesh_options, methods, default_method):
     p.add_argument("--result", metavar="RESULT", help="a result of 'tactrec recognize --json' for DATA, "
                    "drawn instead of recognising DATA again")
     p.add_argument("--next", metavar="PROPOSAL", help="a session's proposal of 'tactrec next --json', drawn "
-                   "instead of proposing again")
+                   "instead of proposing again (with --result and no --next, no proposal is drawn)")
     p.add_argument("--shown", type=count(1), default=5, metavar="N",
                    help="how many registered models, best first, the side panel offers (default 5)")
     p.add_argument("--method", choices=sorted(methods), default=default_method,

@@ -166,7 +166,7 @@ def run(*, out, instances: int = 10, seed: int = 0, jobs: int | None = None, qui
     parts.mkdir(parents=True, exist_ok=True)
     records = run_parallel(_touch_saved, [(t, parts) for t in tasks], jobs=jobs or 1, quiet=quiet,
                            desc="fast-vs-paper")
-    table = {"benchmark": "fast-vs-paper", "scans": scans or "shipped", "instances": instances, "seed": seed,
+    table = {"benchmark": name, "scans": scans or "shipped", "instances": instances, "seed": seed,
              "models": list(models),
              "protocols": {p: PROTOCOLS[p] for p in protocols}, "paper_p3": PAPER,
              "summary": {p: {m: _summary(records, p, m) for m in methods} for p in protocols}}

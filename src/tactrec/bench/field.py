@@ -81,7 +81,7 @@ def run(*, out, instances: int = 5, seed: int = 0, jobs=None, quiet: bool = Fals
         total[key] = {stat: float(np.median([r[key][stat] for r in rows])) for stat in ("median", "p95")}
         total[key]["max"] = float(max(r[key]["max"] for r in rows))
     suffix = "-other" if scans == "other" else ""
-    table = {"benchmark": "field", "scans": scans or "ycb", "instances": instances, "seed": seed,
+    table = {"benchmark": f"field{suffix}", "scans": scans or "ycb", "instances": instances, "seed": seed,
              "total": total, "models": rows}
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / f"field{suffix}.json", table)

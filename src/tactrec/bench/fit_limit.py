@@ -136,7 +136,7 @@ def run(*, out, instances: int = 10, seed: int = 0, jobs: int | None = None, qui
     parts.mkdir(parents=True, exist_ok=True)
     records = run_parallel(_touch_saved, [(t, parts) for t in tasks], jobs=jobs or 1, quiet=quiet,
                            desc="fit-limit")
-    table = {"benchmark": "fit-limit", "scans": scans or "shipped", "instances": instances, "seed": seed, "models": list(models),
+    table = {"benchmark": name, "scans": scans or "shipped", "instances": instances, "seed": seed, "models": list(models),
              "protocols": {p: PROTOCOLS[p] for p in protocols},
              "summary": {p: _summary([r for r in records if r["protocol"] == p]) for p in protocols},
              "records": records}

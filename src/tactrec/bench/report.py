@@ -67,8 +67,8 @@ def _benchmark_of(stem: str, names) -> str | None:
 
 def _section(path: Path, name: str, summary: str, folder: Path) -> str:
     run = _read(path).get("run")
-    stem = path.stem
-    parts = [f"<section id=\"{stem}\"><h2>{html.escape(stem)}</h2><p>{html.escape(summary)}</p>"]
+    stem = html.escape(path.stem, quote=True)
+    parts = [f"<section id=\"{stem}\"><h2>{stem}</h2><p>{html.escape(summary)}</p>"]
     if not isinstance(run, dict):
         date = datetime.datetime.fromtimestamp(path.stat().st_mtime, datetime.timezone.utc)
         parts.append(f"<p class=\"meta\">{html.escape(path.name)} written {date.isoformat(timespec='seconds')} by a "
@@ -77,7 +77,8 @@ def _section(path: Path, name: str, summary: str, folder: Path) -> str:
         return "".join(parts) + "</section>"
     parts.append(f"<p class=\"meta\">made by <code>{html.escape(str(run.get('command', '')))}</code> on "
                  f"{html.escape(str(run.get('date', '')))}</p><pre>{html.escape(str(run.get('text', '')))}</pre>")
-    for plot in run.get("plots", []):
+    plots = run.get("plots")
+    for plot in plots if isinstance(plots, list) else []:
         image = folder / Path(str(plot)).name
         if image.suffix.lower() == ".png" and image.exists():
             parts.append(f"<img alt=\"{html.escape(image.name)}\" src=\"{_png(image)}\">")
@@ -97,7 +98,8 @@ def report_page(folder: Path) -> str:
         if name is not None:
             tables.setdefault(name, []).append(path)
     made = [_section(path, name, BENCHMARKS[name].summary, folder) for name in BENCHMARKS for path in tables.get(name, [])]
-    contents = "".join(f"<li><a href=\"#{p.stem}\">{p.stem}</a></li>" for n in BENCHMARKS for p in tables.get(n, []))
+    contents = "".join(f"<li><a href=\"#{html.escape(p.stem, quote=True)}\">{html.escape(p.stem)}</a></li>"
+                       for n in BENCHMARKS for p in tables.get(n, []))
     waiting = "".join(f"<li><code>tactrec bench {n}</code>: {html.escape(b.summary)}</li>"
                       for n, b in BENCHMARKS.items() if n not in tables)
     now = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")

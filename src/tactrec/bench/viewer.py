@@ -7,7 +7,7 @@ it, and the time headless Chromium (the system's, as for ``tactrec show --png``;
 SwiftShader, its CPU renderer) takes from the start of the page's navigation to its first view drawn
 (the page's own clock, ``performance.now()`` when it marks itself drawn), each page opened
 ``OPENS`` times in a fresh browser context (a cold page each time, the browser already running).
-Median, p95 and max of each.  Targets (issue 51): at most 8 MB and 3 s.
+Median, p95 and max of each.  Targets: at most 8 MB and 3 s.
 """
 
 from __future__ import annotations
@@ -46,6 +46,9 @@ def _draw_seconds(browser, path: Path) -> float:
 
 
 def run(*, out: Path, instances: int, seed: int, jobs=None, quiet: bool = True, **_) -> dict:
+    from ..viewer.still import check_still
+
+    check_still()                                   # one line before any work if no browser can draw
     from playwright.sync_api import sync_playwright
 
     from ..recognition import Recognizer

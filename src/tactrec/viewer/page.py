@@ -75,6 +75,17 @@ function solid(g, colour, opacity) {
                                                          transparent: o < 1, opacity: o}));
 }
 function dot(point, radius, colour, symbol) {
+  if (symbol === 'x') {           // a cross: three crossed bars
+    const cross = new THREE.Group();
+    [[1, 0, 0], [0, 1, 0], [0, 0, 1]].forEach((a) => {
+      const bar = solid(new THREE.BoxGeometry(a[0] ? 4 * radius : 0.6 * radius, a[1] ? 4 * radius : 0.6 * radius,
+                                              a[2] ? 4 * radius : 0.6 * radius), colour);
+      cross.add(bar);
+    });
+    cross.rotation.set(0.6, 0.6, 0);
+    cross.position.set(point[0], point[1], point[2]);
+    return cross;
+  }
   const g = symbol === 'circle' ? new THREE.SphereGeometry(radius, 16, 12) : new THREE.OctahedronGeometry(1.4 * radius);
   const m = solid(g, colour);
   m.position.set(point[0], point[1], point[2]);
@@ -203,12 +214,14 @@ def library() -> str:
 
 def page(scene: dict) -> str:
     """The HTML text of one self-contained page drawing ``scene``."""
-    payload = json.dumps(scene, separators=(",", ":"), allow_nan=False).replace("</", "<\\/")
+    # no <, > or & in the script element, whatever a name holds (JSON.parse reads the escapes back)
+    payload = (json.dumps(scene, separators=(",", ":"), allow_nan=False)
+               .replace("<", "\\u003c").replace(">", "\\u003e").replace("&", "\\u0026"))
     heading = scene.get("title") or "tactrec"
     summary = ""
     if scene.get("best") is not None:
         summary = (f"recognised: <b>{html.escape(str(scene['best']))}</b>, confidence "
-                   f"{scene.get('confidence', 0):.3f}, unknown {scene.get('unknown', 0):.3f}")
+                   f"{float(scene.get('confidence') or 0):.3f}, unknown {float(scene.get('unknown') or 0):.3f}")
     return (
         "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
         f"<title>{html.escape(heading)}</title><style>{_STYLE}</style>"

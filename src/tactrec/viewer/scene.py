@@ -97,16 +97,18 @@ def placed(entry: dict, x: np.ndarray) -> np.ndarray:
     return scale * np.asarray(x, float) @ R.T + t
 
 
-def view(entry: dict, model, *, faces: int, curves: list, normal, marks=(), lines=(), towards=None) -> dict:
+def view(entry: dict, model, *, faces: int, curves: list, normal, marks=(), lines=(), towards=None,
+         contact=None) -> dict:
     """One model's view: its surface (at most ``faces`` triangles) and, in its frame, ``curves``
-    (``{"points": (n, 3), "colour", "name", "opacity"}``, drawn as tubes), the contact (the entry's
-    ``location``) and ``normal`` (``(3,)``, drawn 8 % of the view's size long), ``marks``
+    (``{"points": (n, 3), "colour", "name", "opacity"}``, drawn as tubes), the ``contact`` (``(3,)``;
+    the entry's ``location`` where None) and ``normal`` (``(3,)``, drawn 8 % of the view's size long), ``marks``
     (``{"point": (3,), "name", "colour", "symbol"}``: ``circle``, ``x`` or ``diamond``) and ``lines``
     (``{"points": (n, 3), "name", "colour"}``, drawn as tubes half as thick as the curves'), all
     already in the model's frame.  The axes' ``range`` holds the surface
     and the curves drawn opaque, padded by 5 % of the view's size.  The camera looks at the contact along
-    the normal, or at the point ``towards`` (``(3,)``) from the surface's centre's side of it where
-    one is given, from no farther than the surface leaves clear (``clear``, :func:`_clear`)."""
+    the normal, or at the surface point ``towards`` (``(3,)``) from the side away from the surface's
+    centre where one is given, from no farther than the surface leaves clear (``clear``,
+    :func:`_clear`)."""
     vertices, triangles, original = surface_mesh(model, faces=faces)
     lo, hi = vertices.min(axis=0), vertices.max(axis=0)
     size = float(np.linalg.norm(hi - lo)) or 1.0
@@ -115,12 +117,12 @@ def view(entry: dict, model, *, faces: int, curves: list, normal, marks=(), line
         drawn.append(dict(_tube(c["points"], TUBE * size, size), colour=c["colour"], name=c["name"],
                           opacity=c.get("opacity", 1.0)))
     normal = np.asarray(normal, float)
-    contact = np.asarray(entry["location"], float)
+    contact = np.asarray(entry["location"] if contact is None else contact, float)
     arrow = 0.08 * size * normal / (np.linalg.norm(normal) or 1.0)
     # the axes' range: the surface and the curves that fit it (a slipped touch's may lie far off)
     kept = np.concatenate([vertices] + [np.asarray(c["points"], float) for c in curves if c.get("opacity", 1.0) >= 1.0])
     pad = 0.05 * size
-    target = np.asarray(entry["location"] if towards is None else towards, float)
+    target = contact if towards is None else np.asarray(towards, float)
     look = normal if towards is None else target - 0.5 * (lo + hi)
     look = normal if not np.linalg.norm(look) > 0 else look
     look = look / np.linalg.norm(look)
@@ -130,7 +132,7 @@ def view(entry: dict, model, *, faces: int, curves: list, normal, marks=(), line
         "surface": {"vertices": _rounded(vertices, size), "triangles": triangles.tolist(),
                     "faces": int(len(triangles)), "original_faces": int(original)},
         "curves": drawn,
-        "contact": _rounded(entry["location"], size),
+        "contact": _rounded(contact, size),
         "normal": _rounded(arrow, size),
         "look": _rounded(look, 1.0),
         "target": _rounded(target, size),
@@ -151,8 +153,9 @@ def _tube(points, radius: float, size: float) -> dict:
 
 def _clear(vertices: np.ndarray, triangles: np.ndarray, target: np.ndarray, look: np.ndarray, size: float) -> float:
     """How far (as a share of ``size``) the line of sight from ``target`` along ``look`` runs before it
-    meets the surface (10 where it meets nothing): the camera stays nearer, so that the inside of a
-    cup or a handle's far side does not hide the touch."""
+    meets the surface (10 where it meets nothing; hits within 2 % of ``size``, the decimated
+    surface's own waviness about the target, do not count): the camera stays nearer, so that the
+    inside of a cup or a handle's far side does not hide the touch."""
     origin = target + 1e-3 * size * look
     # Moller-Trumbore, the one ray against every triangle
     a, b, c = (vertices[triangles[:, k]] for k in range(3))
@@ -166,7 +169,7 @@ def _clear(vertices: np.ndarray, triangles: np.ndarray, target: np.ndarray, look
     q = np.cross(s, e1)
     v = (q @ look) * inv
     distance = np.einsum("ij,ij->i", e2, q) * inv
-    hit = ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (distance > 0)
+    hit = ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (distance > 0.02 * size)
     far = distance[hit] if hit.any() else np.array([10.0 * size])
     return float(min(10.0, far.min() / size))
 

@@ -49,6 +49,15 @@ def _proposed_curves(model, entry: dict, proposal: dict, length: float) -> list[
     return [placed(entry, contact + offsets[:, None] * d) for d in directions]
 
 
+def _centre(model) -> np.ndarray:
+    """The middle of ``model``'s bounding box (a closed-form surface's sampled grid)."""
+    from .scene import surface_mesh
+
+    vertices = np.asarray(model.vertices, float) if getattr(model, "kind", None) == "mesh" else \
+        surface_mesh(model, faces=200)[0]
+    return 0.5 * (vertices.min(axis=0) + vertices.max(axis=0))
+
+
 def session_scene(result: dict, touches: list, models: dict, *, proposal: dict | None = None, shown: int = 5,
                   faces: int = 10000, runner_faces: int = 4000, title: str = "") -> dict:
     """The scene of a session's recognition.
@@ -107,11 +116,16 @@ def session_scene(result: dict, touches: list, models: dict, *, proposal: dict |
                        for i, c in enumerate(_proposed_curves(model, r, proposed, length))]
             marks.append({"point": placed(r, np.asarray(proposed["contact"], float)), "name": "next: contact",
                           "colour": NEXT_COLOUR, "symbol": "diamond"})
-        R = pose_of(r)[0]
-        # the camera looks at the touches that fit, from outside the model
-        fitted = [placed(r, meetings[k]) for k in range(len(worlds)) if k not in slipped] or [placed(r, meetings[-1])]
-        views.append(view(r, model, faces=faces if not views else runner_faces, curves=curves,
-                          normal=R @ np.asarray(result.get("normal", [0.0, 0.0, 1.0]), float), marks=marks,
-                          lines=lines, towards=np.mean(fitted, axis=0)))
+        # the contact drawn and looked at: the latest touch that fits (its meeting point, on the surface)
+        last = max((k for k in range(len(worlds)) if k not in slipped), default=len(worlds) - 1)
+        anchor = placed(r, meetings[last]) if worlds else np.asarray(r["location"], float)
+        outward = anchor - _centre(model)
+        normal = pose_of(r)[0] @ np.asarray(result.get("normal", [0.0, 0.0, 1.0]), float)
+        if last != len(worlds) - 1:
+            normal = outward                       # the estimate's normal is the latest touch's, which slipped
+        elif normal @ outward < 0:
+            normal = -normal                       # a session's normal has no side: drawn away from the centre
+        views.append(view(r, model, faces=faces if not views else runner_faces, curves=curves, normal=normal,
+                          marks=marks, lines=lines, towards=anchor, contact=anchor))
     return {"kind": "session", "title": title, "best": result.get("best"), "confidence": result.get("confidence"),
             "unknown": result.get("unknown"), "views": views, "others": others(result, views), "legend": legend}

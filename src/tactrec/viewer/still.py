@@ -68,8 +68,14 @@ def render_still(html: str, png, *, width: int = WIDTH, height: int = HEIGHT, ti
         else:
             sync_playwright = _playwright()
             path = chromium()                               # before any work: one line if there is none
+            from playwright.sync_api import Error
+
             with sync_playwright() as p:
-                chrome = p.chromium.launch(executable_path=path, args=list(ARGS))
+                try:
+                    chrome = p.chromium.launch(executable_path=path, args=list(ARGS))
+                except Error as exc:
+                    first = (str(exc).strip().splitlines() or ["no reason given"])[0]
+                    raise InputError(f"{path} did not start as a headless browser: {first}", "--png") from None
                 try:
                     data = _shot(chrome, page_file, width, height, timeout)
                 finally:
@@ -78,6 +84,16 @@ def render_still(html: str, png, *, width: int = WIDTH, height: int = HEIGHT, ti
 
 
 def _shot(browser, page_file: Path, width: int, height: int, timeout: float) -> bytes:
+    from playwright.sync_api import Error
+
+    try:
+        return _screenshot(browser, page_file, width, height, timeout)
+    except Error as exc:
+        first = (str(exc).strip().splitlines() or ["no reason given"])[0]
+        raise InputError(f"the browser could not draw the still: {first}", "--png") from None
+
+
+def _screenshot(browser, page_file: Path, width: int, height: int, timeout: float) -> bytes:
     context = browser.new_context(viewport={"width": width, "height": height})
     try:
         page = context.new_page()
