@@ -105,13 +105,13 @@ function build(view) {
   group.add(dot(view.contact, (still ? 0.012 : 0.008) * view.size, still ? '#ffffff' : '#000000', 'circle'));
   return group;
 }
-function grid(view, up) {         // round squares under the model, across the up direction
-  const lo = view.range[0], hi = view.range[1], step = niceStep(view.size / 10);
+function grid(view, up) {         // round squares across the up direction, on the model's far side from the camera
+  const lo = view.range[0], hi = view.range[1], step = niceStep(view.size / 10), below = view.look[up.z > 0.5 ? 2 : 1] >= 0;
   const k = up.z > 0.5 ? 2 : 1, across = [0, 1, 2].filter(i => i !== k);
   const cells = 2 * Math.ceil(Math.max(...across.map(i => hi[i] - lo[i])) / 2 / step) + 2;
   const g = new THREE.GridHelper(cells * step, cells, 0xcccccc, 0xe6e6e6);
   if (k === 2) { g.rotation.x = Math.PI / 2; }
-  const at = [0, 1, 2].map(i => i === k ? lo[i] : 0.5 * (lo[i] + hi[i]));
+  const at = [0, 1, 2].map(i => i === k ? (below ? lo[i] : hi[i]) : 0.5 * (lo[i] + hi[i]));
   g.position.set(at[0], at[1], at[2]);
   return [g, step];
 }
