@@ -11,7 +11,7 @@ from tactrec.cli import main
 
 @pytest.fixture(scope="module")
 def folder(tmp_path_factory):
-    """paper-table5 (a table with the paper's numbers) and paper-example run into one folder; a field
+    """paper-example (a table with the paper's numbers beside ours) run into a folder; a field
     table whose run made a plot; a table from a version that recorded no run; one whose name is markup."""
     import matplotlib
 
@@ -21,7 +21,6 @@ def folder(tmp_path_factory):
     from tactrec.bench.report import record_run
 
     out = tmp_path_factory.mktemp("bench-out")
-    assert main(["bench", "paper-table5", "--instances", "1", "--out", str(out), "--quiet"]) == 0
     assert main(["bench", "paper-example", "--instances", "2", "--out", str(out), "--quiet"]) == 0
     fig, ax = plt.subplots(figsize=(4, 3))
     ax.plot([0, 1], [1, 0])
@@ -36,8 +35,8 @@ def folder(tmp_path_factory):
 
 
 def test_each_run_records_its_command_date_and_table(folder):
-    run = json.loads((folder / "paper-table5.json").read_text(encoding="utf-8"))["run"]
-    assert run["command"].startswith("tactrec bench paper-table5 --instances 1 --out ")
+    run = json.loads((folder / "paper-example.json").read_text(encoding="utf-8"))["run"]
+    assert run["command"].startswith("tactrec bench paper-example --instances 2 --out ")
     assert run["date"].endswith("+00:00") and "paper" in run["text"]
 
 
@@ -46,7 +45,7 @@ def test_the_report_holds_every_table_and_plot_and_names_what_was_not_run(folder
     assert main(["bench", "report", "--out", str(folder)]) == 0
     assert capsys.readouterr().out.strip() == f"wrote {folder / 'report.html'}"
     text = (folder / "report.html").read_text(encoding="utf-8")
-    for name in ("paper-table5", "paper-example", "field"):
+    for name in ("paper-example", "field"):
         run = json.loads((folder / f"{name}.json").read_text(encoding="utf-8"))["run"]
         assert f'<section id="{name}">' in text and run["date"] in text
         assert html.escape(run["text"]) in text
