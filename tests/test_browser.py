@@ -27,7 +27,7 @@ def browser():
 
     with sync_playwright() as p:
         assert shutil.which("chromium"), "chromium not found: 'make test' installs Debian's chromium package"
-        chromium = still.browser(p)
+        chromium = still.launch(p)
         try:
             yield chromium
         finally:

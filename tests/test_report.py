@@ -70,7 +70,7 @@ def test_the_report_opens_offline_in_a_browser(folder):
     url = (folder / "report.html").resolve().as_uri()
     errors, requests = [], []
     with sync_playwright() as p:
-        browser = still.browser(p)
+        browser = still.launch(p)
         try:
             page = browser.new_page()
             page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)

@@ -16,21 +16,14 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
-
 from ..database import build_database
 from ..io.atomic import write_text_atomic
 from ..io.touch import save_touch
 from ..surfaces import BUILTIN_SETS
-from .common import write_json
+from .common import spread, write_json
 from .fast_vs_paper import _database, _simulate
 
 __all__ = ["run"]
-
-
-def _spread(values) -> dict:
-    v = np.asarray(values, dtype=np.float64)
-    return {"median": float(np.median(v)), "p95": float(np.percentile(v, 95)), "max": float(np.max(v))}
 
 
 def run(*, out, instances: int = 10, seed: int = 0, quiet: bool = False, **_ignored) -> dict:
@@ -57,7 +50,7 @@ def run(*, out, instances: int = 10, seed: int = 0, quiet: bool = False, **_igno
         rows.append({"file": path.name, "model": entry.name, "recognized": result["best"],
                      "seconds": result["seconds"], "wall": wall})
     table = {"benchmark": "cold-start", "instances": instances, "seed": seed, "models": list(models),
-             "seconds": _spread([r["seconds"] for r in rows]), "wall": _spread([r["wall"] for r in rows]),
+             "seconds": spread([r["seconds"] for r in rows]), "wall": spread([r["wall"] for r in rows]),
              "correct": sum(r["recognized"] == r["model"] for r in rows), "records": rows}
     write_json(out / "cold-start.json", table)
     s, w = table["seconds"], table["wall"]

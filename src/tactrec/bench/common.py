@@ -15,7 +15,7 @@ import numpy as np
 
 from ..io.atomic import write_text_atomic
 
-__all__ = ["paper_values", "instance_rng", "random_face_site", "run_parallel", "write_json", "default_jobs",
+__all__ = ["spread", "paper_values", "instance_rng", "random_face_site", "run_parallel", "write_json", "default_jobs",
            "sources_hash", "saved_record", "recognizer", "CORE_SOURCES", "errors_on_every_model", "error_cell", "SCANS",
            "scan_database", "within_noise"]
 
@@ -114,6 +114,14 @@ def run_parallel(fn: Callable, tasks: Sequence, *, jobs: int, quiet: bool, desc:
     finally:
         bar.close()
     return results
+
+
+def spread(values) -> dict:
+    """``{"median", "p95", "max"}`` of ``values`` (each None where there are none)."""
+    v = np.asarray(values, dtype=np.float64)
+    if v.size == 0:
+        return {"median": None, "p95": None, "max": None}
+    return {"median": float(np.median(v)), "p95": float(np.percentile(v, 95)), "max": float(v.max())}
 
 
 def write_json(path: Path, table: dict) -> None:

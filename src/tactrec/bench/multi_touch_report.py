@@ -15,6 +15,7 @@ import numpy as np
 
 from ..session import STAGES, allowed_fit
 from .calibration import expected_calibration_error
+from .common import spread
 
 __all__ = ["summary", "text", "plot", "truth_found", "paired", "SURE"]
 
@@ -37,13 +38,6 @@ def truth_found(truth: dict | None) -> bool:
 def _at(steps: list, k: int) -> dict:
     """The session's state after ``k`` touches (its last, if it stopped before)."""
     return steps[min(k, len(steps)) - 1]
-
-
-def _quantiles(values) -> dict:
-    v = np.asarray(values, dtype=np.float64)
-    if v.size == 0:
-        return {"median": None, "p95": None, "max": None}
-    return {"median": float(np.median(v)), "p95": float(np.percentile(v, 95)), "max": float(v.max())}
 
 
 def _over_own(step: dict) -> float | None:
@@ -92,17 +86,17 @@ def summary(rows: list[dict], strategies, touches: int) -> dict:
         for n in range(1, touches):
             ratios = [_over_own(r[strategy][n]) for r in rows if len(r[strategy]) > n]
             ratios = [x for x in ratios if x is not None]
-            by_n.append({"touches_before": n, "adds": len(ratios), **_quantiles(ratios)})
+            by_n.append({"touches_before": n, "adds": len(ratios), **spread(ratios)})
             own += ratios
         out[strategy] = {"per_touches": per_k, "mean_touches_to_0.99": float(np.mean(decide)),
                          "sure_wrong_sessions": int(sure_wrong),
-                         "add_seconds": _quantiles(adds),
+                         "add_seconds": spread(adds),
                          "add_ratio_of_medians": float(np.median(adds) / np.median(first)) if adds else None,
-                         "add_over_own": _quantiles(own), "add_over_own_by_touches": by_n,
-                         "propose_seconds": _quantiles([s["propose_seconds"] for r in rows for s in r[strategy]
+                         "add_over_own": spread(own), "add_over_own_by_touches": by_n,
+                         "propose_seconds": spread([s["propose_seconds"] for r in rows for s in r[strategy]
                                                         if "propose_seconds" in s]),
                          "add_stages": _stages([s for r in rows for s in r[strategy][1:]])}
-    out["first_touch_seconds"] = _quantiles(first)
+    out["first_touch_seconds"] = spread(first)
     out["sessions"] = len(rows)
     if "next" in strategies and "random" in strategies:
         out["next_against_random"] = paired(rows, touches)

@@ -17,20 +17,13 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
-
-from .common import scan_database, write_json
+from .common import scan_database, spread, write_json
 from .scale import _touch
 
 __all__ = ["run", "TARGET_MS"]
 
 #: the target of a request's cost beyond its recognition, milliseconds (median)
 TARGET_MS = 20.0
-
-
-def _quantiles(values) -> dict:
-    v = np.asarray(values, dtype=np.float64)
-    return {"median": float(np.median(v)), "p95": float(np.percentile(v, 95)), "max": float(v.max())}
 
 
 def run(*, out: Path, instances: int, seed: int, jobs=None, quiet: bool = True, **_) -> dict:
@@ -60,12 +53,12 @@ def run(*, out: Path, instances: int, seed: int, jobs=None, quiet: bool = True, 
     finally:
         proc.stdin.close()
         proc.wait(timeout=120)
-    overhead = _quantiles([r["overhead_ms"] for r in rows])
-    recognition = _quantiles([r["seconds"] for r in rows])
+    overhead = spread([r["overhead_ms"] for r in rows])
+    recognition = spread([r["seconds"] for r in rows])
     right = sum(r["recognized"] == r["model"] for r in rows)
     table = {"benchmark": "serve", "method": "fast", "requests": len(rows), "seed": seed, "target_ms": TARGET_MS,
              "overhead_ms": overhead, "recognition_seconds": recognition,
-             "trip_seconds": _quantiles([r["trip_seconds"] for r in rows]), "right": right, "rows": rows}
+             "trip_seconds": spread([r["trip_seconds"] for r in rows]), "right": right, "rows": rows}
     table["text"] = "\n".join([
         f"tactrec serve, {len(rows)} P3 requests on the ten paper-fig11 scans (fast), one at a time",
         f"  beyond the recognition: median {overhead['median']:.2f} ms, p95 {overhead['p95']:.2f} ms, "

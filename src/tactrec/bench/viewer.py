@@ -17,9 +17,7 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
-
-from .common import scan_database, write_json
+from .common import scan_database, spread, write_json
 from .scale import _touch
 
 __all__ = ["run", "TARGET_MB", "TARGET_SECONDS", "OPENS"]
@@ -27,11 +25,6 @@ __all__ = ["run", "TARGET_MB", "TARGET_SECONDS", "OPENS"]
 TARGET_MB, TARGET_SECONDS = 8.0, 3.0
 OPENS = 3                   # opens of each page
 WIDTH, HEIGHT = 1200, 800   # the browser window
-
-
-def _quantiles(values) -> dict:
-    v = np.asarray(values, dtype=np.float64)
-    return {"median": float(np.median(v)), "p95": float(np.percentile(v, 95)), "max": float(v.max())}
 
 
 def _draw_seconds(browser, path: Path) -> float:
@@ -54,7 +47,7 @@ def run(*, out: Path, instances: int, seed: int, jobs=None, quiet: bool = True, 
     from ..recognition import Recognizer
     from ..surfaces import BUILTIN_SETS
     from ..viewer import page, touch_scene
-    from ..viewer.still import browser as launch
+    from ..viewer.still import launch
 
     names = BUILTIN_SETS["paper-fig11"]
     db = scan_database(tuple(names))
@@ -80,9 +73,9 @@ def run(*, out: Path, instances: int, seed: int, jobs=None, quiet: bool = True, 
                         print(f"\r{len(rows)}/{len(names) * instances}", end="", file=sys.stderr, flush=True)
         finally:
             chrome.close()
-    size = _quantiles([r["bytes"] / 1e6 for r in rows])
-    draw = _quantiles([d for r in rows for d in r["draw_seconds"]])
-    write = _quantiles([r["write_seconds"] for r in rows])
+    size = spread([r["bytes"] / 1e6 for r in rows])
+    draw = spread([d for r in rows for d in r["draw_seconds"]])
+    write = spread([r["write_seconds"] for r in rows])
     table = {"benchmark": "viewer", "instances": instances, "seed": seed, "opens": OPENS, "window": [WIDTH, HEIGHT],
              "size_mb": size, "draw_seconds": draw, "write_seconds": write,
              "targets": {"size_mb": TARGET_MB, "draw_seconds": TARGET_SECONDS}, "rows": rows}

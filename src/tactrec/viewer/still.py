@@ -17,7 +17,7 @@ from pathlib import Path
 from ..errors import InputError
 from ..io.atomic import write_bytes_atomic
 
-__all__ = ["chromium", "browser", "render_still", "check_still", "ARGS", "WIDTH", "HEIGHT"]
+__all__ = ["chromium", "launch", "render_still", "check_still", "ARGS", "WIDTH", "HEIGHT"]
 
 #: headless Chromium's switches: WebGL on SwiftShader (no GPU needed)
 ARGS = ("--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader")
@@ -36,9 +36,21 @@ def chromium() -> str:
     return found
 
 
-def browser(playwright):
-    """Headless Chromium launched through ``playwright`` (``sync_playwright()``'s object)."""
-    return playwright.chromium.launch(executable_path=chromium(), args=list(ARGS))
+def launch(playwright):
+    """Headless Chromium launched through ``playwright`` (``sync_playwright()``'s object); one
+    :class:`~tactrec.errors.InputError` line if it does not start."""
+    from playwright.sync_api import Error
+
+    path = chromium()
+    try:
+        return playwright.chromium.launch(executable_path=path, args=list(ARGS))
+    except Error as exc:
+        raise InputError(f"{path} did not start as a headless browser: {_reason(exc)}", "--png") from None
+
+
+def _reason(exc) -> str:
+    """A Playwright error's first line."""
+    return (str(exc).strip().splitlines() or ["no reason given"])[0]
 
 
 def _playwright():
@@ -66,16 +78,8 @@ def render_still(html: str, png, *, width: int = WIDTH, height: int = HEIGHT, ti
         if browser is not None:
             data = _shot(browser, page_file, width, height, timeout)
         else:
-            sync_playwright = _playwright()
-            path = chromium()                               # before any work: one line if there is none
-            from playwright.sync_api import Error
-
-            with sync_playwright() as p:
-                try:
-                    chrome = p.chromium.launch(executable_path=path, args=list(ARGS))
-                except Error as exc:
-                    first = (str(exc).strip().splitlines() or ["no reason given"])[0]
-                    raise InputError(f"{path} did not start as a headless browser: {first}", "--png") from None
+            with _playwright()() as p:
+                chrome = launch(p)
                 try:
                     data = _shot(chrome, page_file, width, height, timeout)
                 finally:
@@ -89,8 +93,7 @@ def _shot(browser, page_file: Path, width: int, height: int, timeout: float) -> 
     try:
         return _screenshot(browser, page_file, width, height, timeout)
     except Error as exc:
-        first = (str(exc).strip().splitlines() or ["no reason given"])[0]
-        raise InputError(f"the browser could not draw the still: {first}", "--png") from None
+        raise InputError(f"the browser could not draw the still: {_reason(exc)}", "--png") from None
 
 
 def _screenshot(browser, page_file: Path, width: int, height: int, timeout: float) -> bytes:
