@@ -289,6 +289,26 @@ class Touch:
             h.update(np.float64(self.tip).tobytes())
         return h.hexdigest()
 
+    @cached_property
+    def scales(self):
+        """The data normal at several scales (:func:`tactrec.normal_scales.cone_normals`), finest first
+        and the estimate's own (eq. 1, over its fit's window) last, this copy's units, oriented by the
+        ``outward`` hint where given, else like the estimate's normal.  Where they disagree
+        (:attr:`~tactrec.normal_scales.Scales.agree` False) the touch lies on a sharp, thin or folded
+        place."""
+        from .engine.screen import DISTINCT
+        from .normal_scales import cone_normals
+
+        g = self.geometry
+        side = g.normal if self.data.outward is None else np.asarray(self.data.outward, dtype=np.float64)
+        return cone_normals(self.curves, g.contact, side, sigma=self.sigma, distinct=DISTINCT, window=g.normal)
+
+    def fine_normal(self, sign: int) -> np.ndarray | None:
+        """The finest scale's normal (:attr:`scales`) on side ``sign`` (1: as oriented, -1: reversed);
+        None where no chord is short enough."""
+        normals = self.scales.normals
+        return sign * normals[0] if len(normals) > 1 else None          # the last is the window's own
+
     @property
     def sigma(self) -> float:
         """The noise sigma in this copy's units."""

@@ -81,13 +81,21 @@ def _ends(curves, per_curve: int) -> np.ndarray:
     return np.concatenate(out)
 
 
-def data_normals(geometry, fitted: np.ndarray, *, distinct: float) -> list[np.ndarray]:
-    """The data normals a touch is screened with: the fitted one (a paraboloid fit, as the model's
-    places are fitted) and the curves' own (eq. 1) where they differ by more than ``distinct``
-    degrees (a contact on a feature, where a fit at the paraboloid's scale smooths it away)."""
-    out = [np.asarray(fitted, dtype=np.float64)]
-    if float(np.sum(geometry.normal * fitted)) < np.cos(np.deg2rad(distinct)):       # element-wise: no BLAS
-        out.append(np.asarray(geometry.normal, dtype=np.float64))
+def data_normals(geometry, fitted: np.ndarray, *, distinct: float, fine: np.ndarray | None = None) -> list[tuple]:
+    """The data normals a touch is screened with, each with the model's normals it goes onto
+    (``"fitted"``: each place's paraboloid fit; ``"ring"``: its one-ring normal, eq. 13): the fitted
+    one onto the fitted ones (a paraboloid fit, as the model's places are fitted); the curves' own
+    (eq. 1) where it differs from that by more than ``distinct`` degrees (a contact on a feature,
+    where a fit at the paraboloid's scale smooths it away); and the finest scale's tangent cone
+    (``fine``, :func:`tactrec.normal_scales.cone_normals`) onto the one-ring normals where it differs
+    from both by more than ``distinct`` (a sharp, thin or folded place: only the first millimetre
+    sees the surface there, as only the one ring does on the model)."""
+    cos = np.cos(np.deg2rad(distinct))
+    out = [(np.asarray(fitted, dtype=np.float64), "fitted")]
+    if float(np.sum(geometry.normal * fitted)) < cos:       # element-wise: no BLAS
+        out.append((np.asarray(geometry.normal, dtype=np.float64), "fitted"))
+    if fine is not None and all(float(np.sum(fine * n)) < cos for n, _ in out):
+        out.append((np.asarray(fine, dtype=np.float64), "ring"))
     return out
 
 

@@ -83,7 +83,7 @@ def field_stages(config: FastConfig, tier) -> tuple:
     return (turns, *config.screen_stages[0][1:]), (2 * turns, *config.screen_stages[-1][1:])
 
 
-def _field_poses(model, s, g, spots: np.ndarray, fit, tier, config: FastConfig, context, exact, x):
+def _field_poses(model, s, g, sign: int, spots: np.ndarray, fit, tier, config: FastConfig, context, exact, x):
     """A field tier's hypotheses at the places ``spots``: screened on the field with the data's normals
     (or, in a tilted tier, with normals tilted out to ``tier.tilt`` degrees, then each of the best
     few set on a dense local grid: :func:`tactrec.engine.screen.local_screen`), the best
@@ -98,13 +98,15 @@ def _field_poses(model, s, g, spots: np.ndarray, fit, tier, config: FastConfig, 
 
     stages = field_stages(config, tier)
     if tier.tilt > 0:        # one screen over every tilted normal
-        normals = [np.stack(tilted_normals(fit[2], g.tangents[0], cone=tier.tilt, step=config.tilt_step))]
+        normals = [(np.stack(tilted_normals(fit[2], g.tangents[0], cone=tier.tilt, step=config.tilt_step)),
+                    "fitted")]
     else:
-        normals = data_normals(g, fit[2], distinct=DISTINCT)
+        normals = data_normals(g, fit[2], distinct=DISTINCT, fine=s.fine_normal(sign))
     field = model.distance_field
     x3, poses, lookups, q, tried = s.joint_subset(3 * config.coarse_points), [], 0, 0, 0
-    for dn in normals:
-        found = screen(model, g, spots, model.fine_curvatures.normal[spots], s.curves, dn,
+    for dn, kind in normals:
+        onto = model.fine_curvatures.normal[spots] if kind == "fitted" else model.vertex_normals[spots]
+        found = screen(model, g, spots, onto, s.curves, dn,
                        stages=stages, keep=config.screen_keep, extra=context)
         R, tr, grid = field_refine(*field.args(), found.R, found.t, x3, config.field_steps)
         lookups += found.lookups + len(R) * len(x3) * (config.field_steps + 1)
@@ -147,7 +149,7 @@ def _cheap(held, indices, touch, config: FastConfig, k: int) -> list[dict]:
                     continue
                 context_middles = s.screen_subset(config.coarse_points)[len(s.subset(config.coarse_points)):] \
                     if t.context else None
-                R, tr, score, q, n = _field_poses(seen, s, g, spots, fit, tier, config, context_middles, exact, x)
+                R, tr, score, q, n = _field_poses(seen, s, g, sign, spots, fit, tier, config, context_middles, exact, x)
                 tried, queries = tried + n, queries + q
                 poses.append((R, tr, score, np.full(len(R), sign)))
                 continue
