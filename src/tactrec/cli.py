@@ -338,10 +338,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--jobs", type=_count(1), default=None, help="worker processes (default: up to 2)")
     p.add_argument("--method", choices=sorted(METHODS), default="paper",
                    help="method of the paper-* reproductions (default paper)")
-    p.add_argument("--scans", choices=("shipped", "paper-like", "other"), default=None,
+    p.add_argument("--scans", choices=("shipped", "paper-like", "other", "cad"), default=None,
                    help="paper-fig11, paper-table6, paper-steps: the YCB scans as shipped (paper-steps: paper-like), "
                         "or scaled to 60-95 mm and Loop-subdivided to the paper's resolution; fast-vs-paper, "
-                        "fit-limit, field: 'other' for 14 free-form meshes from other sources (fetched once)")
+                        "fit-limit, field: 'other' for 14 free-form meshes from other sources (fetched once), 'cad' "
+                        "for 10 machined parts with sharp edges and flat faces (made by code)")
     p.add_argument("--delta-only", action="store_true",
                    help="paper-fig11: only the delta sweep (one recognition per touch), l and phi at the defaults")
     p.add_argument("--lengths", type=_positives, default=None, metavar="MM,...",

@@ -24,7 +24,7 @@ def _known(values: list, known, what: str, option: str, name: str) -> tuple:
 
 #: the benchmarks that take ``--scans``, and which kinds each takes
 SCAN_KINDS = {**{name: ("shipped", "paper-like") for name in ("paper-fig11", "paper-table6", "paper-steps")},
-              **{name: ("shipped", "other") for name in ("fast-vs-paper", "fit-limit", "field")}}
+              **{name: ("shipped", "other", "cad") for name in ("fast-vs-paper", "fit-limit", "field")}}
 
 
 def cmd_bench(args) -> int:

@@ -1,7 +1,8 @@
 """The distance fields against exact distances (``tactrec bench field``).
 
 For every mesh of the set (the 78 YCB scans by default, ``--scans other``
-for the meshes of :mod:`tactrec.bench.other_scans`), the field is built as a
+for the meshes of :mod:`tactrec.bench.other_scans`, ``--scans cad`` for the
+parts of :mod:`tactrec.bench.cad_parts`), the field is built as a
 database builds it (:mod:`tactrec.surfaces.mesh_field`) and compared with
 libigl's exact distances at ``instances`` x 1,000 seeded points: points on the
 surface (uniform over its area: where a touch's points lie under the true
@@ -65,10 +66,11 @@ def run(*, out, instances: int = 5, seed: int = 0, jobs=None, quiet: bool = Fals
     from tqdm import tqdm
 
     out = Path(out)
-    if scans == "other":
-        from .other_scans import other_database
+    if scans in ("other", "cad"):
+        from .cad_parts import CAD
+        from .other_scans import OTHER, other_database
 
-        models = [e.model for e in other_database().entries]
+        models = [e.model for e in other_database(OTHER if scans == "other" else CAD).entries]
     else:
         from ..surfaces import load_model, ycb_names
 
@@ -80,7 +82,7 @@ def run(*, out, instances: int = 5, seed: int = 0, jobs=None, quiet: bool = Fals
     for key in ("on_surface", "in_band"):
         total[key] = {stat: float(np.median([r[key][stat] for r in rows])) for stat in ("median", "p95")}
         total[key]["max"] = float(max(r[key]["max"] for r in rows))
-    suffix = "-other" if scans == "other" else ""
+    suffix = f"-{scans}" if scans in ("other", "cad") else ""
     table = {"benchmark": f"field{suffix}", "scans": scans or "ycb", "instances": instances, "seed": seed,
              "total": total, "models": rows}
     out.mkdir(parents=True, exist_ok=True)

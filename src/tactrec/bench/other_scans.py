@@ -12,6 +12,8 @@ listed files are read from them.
 Each model is scaled so that its bounding box's diagonal is the size listed
 (55-105 mm, the span of the paper's scans), in millimetres.  Nothing in the
 method is tuned on them: they stand in for the scans tactrec will meet.
+:func:`other_database` also builds the machined parts of
+:mod:`tactrec.bench.cad_parts` (``--scans cad``), made by code.
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from .cad_parts import CAD
 
 __all__ = ["SOURCES", "OTHER", "fetch", "other_database"]
 
@@ -89,6 +92,18 @@ def fetch(folder: Path | None = None) -> dict[str, Path]:
     return out
 
 
+def _part(name: str):
+    """The CAD part ``name`` as a mesh model (mm), named by its geometry's hash."""
+    import hashlib
+
+    from ..surfaces.mesh import MeshModel
+    from .cad_parts import part_mesh
+
+    vertices, faces = part_mesh(name)
+    digest = hashlib.sha256(vertices.tobytes() + faces.tobytes()).hexdigest()
+    return MeshModel(vertices, faces, name=name, units="mm", source=f"<cad part {name}>", source_hash=digest)
+
+
 @functools.lru_cache(maxsize=1)
 def other_database(names: tuple[str, ...] = OTHER):
     """The meshes ``names`` of :data:`SOURCES`, each scaled to its size in millimetres, with their
@@ -98,10 +113,13 @@ def other_database(names: tuple[str, ...] = OTHER):
     from ..database import Database, model_entry
     from ..surfaces.mesh import MeshModel
 
-    files = fetch()
     sizes = {name: size for name, _, _, size in SOURCES}
+    files = fetch() if set(names) & set(sizes) else {}
     entries = []
     for name in names:
+        if name in CAD:
+            entries.append(model_entry(_part(name)))
+            continue
         if name not in sizes:
             raise InputError(f"no such scan among the other sources; choose from {', '.join(OTHER)}", name)
         raw = trimesh.load(files[name], force="mesh", process=False)
