@@ -25,7 +25,7 @@ from ..surfaces.mesh_curvature import tangents
 from .kernels import field_best, screen_rotations
 
 __all__ = ["Screen", "screen", "screen_places", "data_normals", "tilt_rings", "tilted_normals", "local_screen",
-           "local_lookups", "DISTINCT", "LOCAL_STEPS"]
+           "local_lookups", "local_grid", "local_poses", "DISTINCT", "LOCAL_STEPS"]
 
 #: values of each turn and shift of :func:`local_screen`'s grid about a pose (``LOCAL_STEPS**6`` poses)
 LOCAL_STEPS = 5
@@ -120,6 +120,29 @@ def tilted_normals(normal: np.ndarray, reference: np.ndarray, *, cone: float, st
     return out
 
 
+def local_grid(angle: float, shift: float, steps: int) -> tuple[np.ndarray, np.ndarray]:
+    """The turns ``(steps**3, 3, 3)`` of up to ``angle`` degrees about three axes and the shifts
+    ``(steps**3, 3)`` of up to ``shift`` along them, ``steps`` values of each: a grid of ``steps**6``
+    poses about one (:func:`local_screen`, :func:`local_poses`)."""
+    a = np.deg2rad(np.linspace(-angle, angle, steps))
+    turns = rotations_from_vectors(np.stack(np.meshgrid(a, a, a, indexing="ij"), -1).reshape(-1, 3))
+    d = np.linspace(-shift, shift, steps)
+    return turns, np.stack(np.meshgrid(d, d, d, indexing="ij"), -1).reshape(-1, 3)
+
+
+def local_poses(R: np.ndarray, t: np.ndarray, contact: np.ndarray, *, angle: float, shift: float,
+                steps: int) -> tuple[np.ndarray, np.ndarray]:
+    """Every pose of :func:`local_grid` about each pose ``R (s, 3, 3), t (s, 3)``, turned about the
+    contact's image: ``R (s * steps**6, 3, 3), t (s * steps**6, 3)``, seed by seed."""
+    turns, shifts = local_grid(angle, shift, steps)
+    pivot = rotate(R, contact) + t                                                     # (s, 3)
+    turned = compose(turns[None], R[:, None]).reshape(-1, 3, 3)                        # (s * k, 3, 3)
+    Rg = np.repeat(turned, len(shifts), axis=0)
+    tg = (np.repeat(pivot, len(turns) * len(shifts), axis=0) + np.tile(shifts, (len(R) * len(turns), 1))
+          - rotate(Rg, contact))
+    return Rg, tg
+
+
 def local_lookups(seeds: int, points: int, *, steps: int = LOCAL_STEPS) -> int:
     """The field lookups of :func:`local_screen` about ``seeds`` poses scored on ``points`` points."""
     return int(seeds * steps ** 6 * points)
@@ -133,10 +156,7 @@ def local_screen(model, R: np.ndarray, t: np.ndarray, x: np.ndarray, contact: np
     bridges the gap between a coarse grid of hypotheses (places, tilts) and the basin of the
     Gauss-Newton steps, which on a faceted surface is a few degrees wide.  Returns each seed's best
     pose ``R (s, 3, 3), t (s, 3)``, its field score ``(s,)`` and the lookups spent."""
-    a = np.deg2rad(np.linspace(-angle, angle, steps))
-    turns = rotations_from_vectors(np.stack(np.meshgrid(a, a, a, indexing="ij"), -1).reshape(-1, 3))
-    d = np.linspace(-shift, shift, steps)
-    shifts = np.stack(np.meshgrid(d, d, d, indexing="ij"), -1).reshape(-1, 3)
+    turns, shifts = local_grid(angle, shift, steps)
     eye = np.ascontiguousarray(np.broadcast_to(np.eye(3), (len(shifts), 3, 3)))
     field = model.distance_field
     Rb, tb, sb = np.empty_like(R), np.empty_like(t), np.empty(len(R))

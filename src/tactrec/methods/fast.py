@@ -52,7 +52,20 @@ standing exceeds by ``ratio``.  No later tier could then change the model,
 only move its pose within what the noise cannot tell apart (the final polish
 still refines it): on noisy data the true pose's error lies above the fit
 limit about half the time, and such a search went on through the leader's
-deepest tiers for nothing.  Else it stops when nothing is left.  ``among`` limits a search
+deepest tiers for nothing.  Else it stops when nothing is left.
+
+When the tiers end and the best error is still beyond a plausible fit, the
+fit test steers the budget that is left (:func:`~.fast_stages._hopped`): the
+leading poses (within ``ratio`` of the best, at most ``polish`` models) are
+searched again about themselves, each with its best alternative, on a grid
+of ``hop_steps`` turns and shifts in each of the six directions, ``hop_angle``
+degrees and ``hop_shift`` x the touch's radius out, every pose refined on
+exact distances.  On a scan's facets, at a sharp or thin place, the exact
+steps from a start a few degrees off settle on a nearby pose that fits a few
+times worse than the truth (their basin is about 2 degrees and 0.2 mm, the
+search's grids are coarser); the grid's step is that basin, so the true pose
+lies in the basin of one of its starts.  A round that does not halve a
+pose's error halves its grid, down to a quarter.  ``among`` limits a search
 to chosen models (the budget counts those alone).  It also stops before a round whose estimated cost would take the
 work (closest-point queries) past ``budget`` per model; such a search is
 reported as not settled (the budget counts per model and per normal tried:
@@ -88,7 +101,7 @@ from ..registration import closedform_fast, mesh_fast
 from ..registration.result import Registration
 from .base import NOT_SEARCHED, Config, SearchOutcome
 from .common import in_model_units
-from .fast_stages import _cheap, _closed_form, _polished, _refined, field_stages, tier_span
+from .fast_stages import _cheap, _closed_form, _hopped, _polished, _refined, field_stages, hop_cost, tier_span
 
 __all__ = ["FastMethod", "FastConfig", "Tier", "TIERS", "tier_cost", "tier_places"]
 
@@ -147,18 +160,22 @@ class FastConfig(Config):
     screen_keep: int = 96
     field_steps: int = 6
     tilt_step: float = 20.0
+    hop_seeds: int = 2
+    hop_steps: int = 3
+    hop_angle: float = 3.0
+    hop_shift: float = 0.02
 
     def __post_init__(self):
         tiers = tuple(self.tiers)
         object.__setattr__(self, "tiers", tiers)
         self._check("tiers", len(tiers) > 0 and all(isinstance(t, Tier) for t in tiers), "a non-empty tuple of Tier")
         for name in ("budget", "coarse_points", "cheap_steps", "screen", "refine", "iterations", "polish",
-                     "polish_iterations", "candidates", "field_steps", "history"):
+                     "polish_iterations", "candidates", "field_steps", "history", "hop_seeds", "hop_steps"):
             value = getattr(self, name)
             least = 0 if name in ("polish", "history") else 1
             self._check(name, isinstance(value, (int, np.integer)) and value >= least, f"a whole number >= {least}")
         self._check("coarse_points", self.coarse_points >= 3, "at least 3")
-        for name in ("spread", "ratio", "umbilic", "floor", "within", "tolerance"):
+        for name in ("spread", "ratio", "umbilic", "floor", "within", "tolerance", "hop_angle", "hop_shift"):
             self._check(name, np.isfinite(getattr(self, name)) and getattr(self, name) > 0, "a positive number")
         self._check("ratio", self.ratio >= 1.0, "at least 1")
         stages = tuple((int(r), int(p), float(f)) for r, p, f in self.screen_stages)
@@ -323,6 +340,7 @@ class FastMethod:
         signs = len(touch.orientations)
         share = len(touch.points) / len(touch.joint_points)
         polish = config.polish * config.polish_iterations * len(touch.points)        # the final polish's work
+        hop = hop_cost(config, len(touch.curves), len(touch.joint_points))          # one model's _hopped
         allowed = config.budget * len(chosen) * signs
         allowed = allowed if budget is None else min(allowed, budget)
         while True:
@@ -343,6 +361,29 @@ class FastMethod:
                 break
             depth = max(depth, k + 1)
             work += self._tier(state, group, k, runner)
+        # the fit test steers what is left: while the best pose lies beyond what the noise allows, the
+        # leading poses are searched again about themselves (_hopped), as far as the budget goes; a
+        # round that does not halve a pose's error halves its grid, down to a quarter
+        spans = {i: 1.0 for i in state.best}
+        while meshes:
+            _, e1 = state.leader()
+            if not (np.isfinite(e1) and e1 > state.plausible):
+                break
+            room = max(0, int((allowed - work * share - polish) // hop))
+            near = [i for i in sorted(state.best, key=lambda i: (state.error(i), i))
+                    if i in meshes and state.best[i].ok and state.error(i) <= config.ratio * e1
+                    and spans.get(i, 0.0) >= 0.25][:min(room, config.polish)]
+            if not near:
+                break
+            items = [(state.best[i], spans[i]) for i in near]
+            for i, found in zip(near, runner.map(_hopped, near, touch, config, items=items)):
+                work += found["queries"]
+                before = state.error(i)
+                if clearly_less(_error(found["registration"]), before):
+                    state.best[i] = found["registration"]
+                if not _error(found["registration"]) <= 0.5 * before:
+                    spans[i] /= 2.0
+            settled = settled or state.settled()
         top = [i for i in sorted(state.best, key=lambda i: (state.error(i), i)) if state.best[i].ok][:config.polish]
         for i, found in zip(top, runner.map(_polished, top, touch, config, False, items=[state.best[i] for i in top])):
             state.best[i], work = found["registration"], work + found["queries"]

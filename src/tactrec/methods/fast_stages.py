@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..engine import LOOKUP_COST
+from ..registration.mesh_fast import cell_mates
 from ..linalg import stable_order
 from ..registration import closedform_fast, mesh_fast
 from ..registration.result import Registration
@@ -105,8 +106,10 @@ def _field_poses(model, s, g, sign: int, spots: np.ndarray, fit, tier, config: F
     field = model.distance_field
     x3, poses, lookups, q, tried = s.joint_subset(3 * config.coarse_points), [], 0, 0, 0
     for dn, kind in normals:
-        onto = model.fine_curvatures.normal[spots] if kind == "fitted" else model.vertex_normals[spots]
-        found = screen(model, g, spots, onto, s.curves, dn,
+        # a one-ring normal changes from vertex to vertex at a sharp place: every vertex of the cells
+        where = spots if kind == "fitted" else cell_mates(model, spots, config.screen_step * s.radius)
+        onto = model.fine_curvatures.normal[where] if kind == "fitted" else model.vertex_normals[where]
+        found = screen(model, g, where, onto, s.curves, dn,
                        stages=stages, keep=config.screen_keep, extra=context)
         R, tr, grid = field_refine(*field.args(), found.R, found.t, x3, config.field_steps)
         lookups += found.lookups + len(R) * len(x3) * (config.field_steps + 1)
@@ -237,6 +240,51 @@ def _polished(held, indices, touch, config: FastConfig, fresh: bool, registratio
         if fresh:
             better = dataclasses.replace(better, alternatives=r.alternatives, candidates=r.candidates)
         out.append({"registration": better, "queries": q})
+    return out
+
+
+def hop_cost(config: FastConfig, curves: int, points: int) -> int:
+    """The closest-point queries of :func:`_hopped` on one model: ``hop_seeds`` grids of
+    ``hop_steps**6`` poses, each two steps on ``coarse_points`` points a curve; the best ``2 refine``
+    ``iterations`` steps on all ``points``."""
+    grid = config.hop_seeds * config.hop_steps ** 6
+    return int(2 * grid * config.coarse_points * curves + 2 * config.refine * config.iterations * points)
+
+
+def _hopped(held, indices, touch, config: FastConfig, items: list[tuple[Registration, float]]) -> list[dict]:
+    """The registrations ``items`` beyond the fit limit, each with its grid's span, searched again
+    about its pose and its best alternatives (``hop_seeds`` in all): a grid of turns and shifts about
+    the contact's image (:func:`tactrec.engine.screen.local_poses`, ``hop_steps`` values of each of
+    the six, ``span`` x ``hop_angle`` degrees and ``span`` x ``hop_shift`` x the touch's radius
+    out), every pose two exact steps on a few points a
+    curve, the best ``2 refine`` then ``iterations`` steps on all points; kept where the error falls.
+    The grid's step is the exact steps' basin (a start a degree or two and a tenth of a millimetre
+    off reaches the fit; from farther on a scan's facets the steps settle on a nearby pose that
+    fits a few times worse), so one of its poses lies in the true pose's basin when the search
+    ended within a grid's span of it."""
+    from ..engine.screen import local_poses
+
+    out = []
+    for index, (r, span) in zip(indices, items):
+        model = held.entries[index].model
+        t = in_model_units(touch, model)
+        seeds = [np.concatenate([r.rotation, r.translation[:, None]], axis=1)]
+        if r.alternatives is not None:
+            seeds += [a for a in r.alternatives[1:config.hop_seeds]]
+        seeds = np.stack(seeds[:config.hop_seeds])
+        R, tr = local_poses(seeds[:, :, :3], seeds[:, :, 3], t.geometry.contact, angle=span * config.hop_angle,
+                            shift=span * config.hop_shift * t.radius, steps=config.hop_steps)
+        R, tr, first, q1 = solve(t.exact(model, config.coarse_points), R, tr, t.joint_subset(config.coarse_points),
+                                 Criteria(2, tolerance=config.tolerance, predict=True))
+        best = stable_order(first)[:2 * config.refine]
+        R, tr, error, q2 = solve(t.exact(model), R[best], tr[best], t.joint_points,
+                                 Criteria(config.iterations, tolerance=config.tolerance, history=config.history))
+        b = int(stable_order(error)[0])
+        better = r
+        if error[b] < r.error:
+            better = dataclasses.replace(_registration(model, t, R[b], tr[b], error[b], r.normal_sign),
+                                         alternatives=r.alternatives, candidates=r.candidates)
+        out.append({"registration": better, "queries": q1 + q2})
     return out
 
 

@@ -76,13 +76,33 @@ def places(model: MeshModel, geometry: LocalGeometry, x: np.ndarray, radius: flo
     return chosen, gap[chosen], (dk, direction, normal)
 
 
-def first_per_cell(model: MeshModel, order: np.ndarray, size: float) -> np.ndarray:
-    """Of the vertices ``order (n,)``, the first of each cell of a grid ``size`` across, in that order."""
+def _cells(model: MeshModel, vertices: np.ndarray, size: float) -> np.ndarray:
+    """The cell of a grid ``size`` across each of ``vertices (n,)`` lies in, as one integer each."""
     low = model.bounds[0]
     span = np.floor((model.bounds[1] - low) / size).astype(np.int64) + 1
-    cell = np.floor((model.vertices[order] - low) / size).astype(np.int64)
-    _, first = np.unique((cell[:, 0] * span[1] + cell[:, 1]) * span[2] + cell[:, 2], return_index=True)
+    cell = np.floor((model.vertices[vertices] - low) / size).astype(np.int64)
+    return (cell[:, 0] * span[1] + cell[:, 1]) * span[2] + cell[:, 2]
+
+
+def first_per_cell(model: MeshModel, order: np.ndarray, size: float) -> np.ndarray:
+    """Of the vertices ``order (n,)``, the first of each cell of a grid ``size`` across, in that order."""
+    _, first = np.unique(_cells(model, order, size), return_index=True)
     return order[np.sort(first)]
+
+
+def cell_mates(model: MeshModel, places: np.ndarray, size: float) -> np.ndarray:
+    """Every vertex in the cells (a grid ``size`` across) of ``places (p,)`` (one place a cell, as
+    :func:`first_per_cell` gives them), cell by cell in the order of ``places``, each cell's place
+    first and the rest by index."""
+    cells = _cells(model, np.arange(len(model.vertices)), size)
+    mine = _cells(model, places, size)
+    order = np.argsort(mine, kind="stable")
+    at = np.clip(np.searchsorted(mine[order], cells), 0, len(mine) - 1)
+    rank = np.where(mine[order][at] == cells, order[at], -1)                # each vertex's cell's rank
+    keep = np.flatnonzero(rank >= 0)
+    own = np.zeros(len(cells), dtype=bool)
+    own[places] = True
+    return keep[np.lexsort((keep, ~own[keep], rank[keep]))]
 
 
 #: the normal tilted four ways (rotation vectors about the frame's first two axes, per radian)
