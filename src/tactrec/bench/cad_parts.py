@@ -39,10 +39,14 @@ def _extruded(cells: list[tuple[int, int]], xs: list[float], ys: list[float], he
 
 
 def _revolved(profile: list[tuple[float, float]]):
-    """The solid swept by a closed ``(radius, height)`` profile about the z axis (128 sections)."""
+    """The solid swept by a ``(radius, height)`` profile about the z axis (128 sections): from the axis
+    back to it, or a loop off the axis (closed here)."""
     from trimesh.creation import revolve
 
-    return revolve(np.array(profile, dtype=np.float64), sections=128)
+    line = np.array(profile, dtype=np.float64)
+    if line[0, 0] > 0:
+        line = np.vstack([line, line[:1]])
+    return revolve(line, sections=128)
 
 
 def _prism(polygon: list[tuple[float, float]], height: float):
