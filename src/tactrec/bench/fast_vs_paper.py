@@ -207,7 +207,8 @@ def run(*, out, instances: int = 10, seed: int = 0, jobs: int | None = None, qui
 
 
 def _markdown(table: dict) -> str:
-    kind = "meshes from other sources" if table.get("scans") == "other" else "YCB scans"
+    kind = {"other": "meshes from other sources", "cad": "machined parts made by code"}.get(table.get("scans"),
+                                                                                            "YCB scans")
     lines = [f"{len(table['models'])} {kind}, {table['instances']} touches each per protocol (seed "
              f"{table['seed']}); both methods on the same touches.", "",
              "| protocol | method | success | no fit | unsettled | located | median s | p95 s | max s | mean s | "
