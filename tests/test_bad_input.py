@@ -483,7 +483,7 @@ def test_bench_sweep_options_belong_to_their_benchmarks(tmp_path, capsys):
     bad(capsys, ["bench", "paper-fig11", "--scans", "other", "--out", tmp_path / "bench"], "paper-fig11",
         "paper-fig11 takes --scans shipped or paper-like, not other")
     bad(capsys, ["bench", "fit-limit", "--scans", "paper-like", "--out", tmp_path / "bench"], "fit-limit",
-        "fit-limit takes --scans shipped or other, not paper-like")
+        "fit-limit takes --scans shipped, other or cad, not paper-like")
     bad(capsys, ["bench", "kernels", "--delta-only", "--out", tmp_path / "bench"], "kernels",
         "--delta-only applies to paper-fig11 only")
     bad(capsys, ["bench", "paper-table6", "--lengths", "9,24", "--out", tmp_path / "bench"], "paper-table6",

@@ -46,7 +46,8 @@ def cmd_bench(args) -> int:
         if kinds is None:
             raise InputError(f"--scans applies to {', '.join(SCAN_KINDS)} only", args.name)
         if args.scans not in kinds:
-            raise InputError(f"{args.name} takes --scans {' or '.join(kinds)}, not {args.scans}", args.name)
+            listed = " or ".join([", ".join(kinds[:-1]), kinds[-1]] if len(kinds) > 1 else list(kinds))
+            raise InputError(f"{args.name} takes --scans {listed}, not {args.scans}", args.name)
     for option, value in (("--delta-only", args.delta_only or None), ("--lengths", args.lengths),
                           ("--angles", args.angles)):
         if value is not None and args.name != "paper-fig11":
