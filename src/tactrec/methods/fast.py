@@ -66,7 +66,8 @@ steps from a start a few degrees off settle on a nearby pose that fits a few
 times worse than the truth (their basin is about 2 degrees and 0.2 mm, the
 search's grids are coarser); the grid's step is that basin, so the true pose
 lies in the basin of one of its starts.  A round that does not halve a
-pose's error halves its grid, down to a quarter.  On noisy data a stall's
+pose's error halves its grid, down to a quarter, and a pose takes three
+rounds at the most.  On noisy data a stall's
 error lies within what the noise allows, and a best pose beyond it is a
 miss elsewhere, which no local search mends (on the hard touches of
 ``tactrec bench fast-vs-paper`` it mended none of 55 and cost twice the p95).  ``among`` limits a search
@@ -368,8 +369,8 @@ class FastMethod:
         # the fit test steers what is left: while the best pose lies beyond a plausible fit of data
         # finer than the fit floor, the leading poses are searched again about themselves (_hopped),
         # as far as the budget goes; a round that does not halve a pose's error halves its grid, down
-        # to a quarter
-        spans = {i: 1.0 for i in state.best}
+        # to a quarter; three rounds a pose at the most
+        spans, rounds = {i: 1.0 for i in state.best}, {i: 0 for i in state.best}
         while meshes and noise_fit(touch.noise) <= config.floor * touch.radius:
             _, e1 = state.leader()
             if not (np.isfinite(e1) and e1 > state.plausible):
@@ -377,13 +378,13 @@ class FastMethod:
             room = max(0, int((allowed - work * share - polish) // hop))
             near = [i for i in sorted(state.best, key=lambda i: (state.error(i), i))
                     if i in meshes and state.best[i].ok and state.error(i) <= config.ratio * e1
-                    and spans.get(i, 0.0) >= 0.25][:min(room, config.polish)]
+                    and spans.get(i, 0.0) >= 0.25 and rounds.get(i, 3) < 3][:min(room, config.polish)]
             if not near:
                 break
             items = [(state.best[i], spans[i]) for i in near]
             for i, found in zip(near, runner.map(_hopped, near, touch, config, items=items)):
                 work += found["queries"]
-                before = state.error(i)
+                before, rounds[i] = state.error(i), rounds[i] + 1
                 if clearly_less(_error(found["registration"]), before):
                     state.best[i] = found["registration"]
                 if not _error(found["registration"]) <= 0.5 * before:

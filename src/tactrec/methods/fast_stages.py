@@ -19,7 +19,6 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..engine import LOOKUP_COST
-from ..registration.mesh_fast import cell_mates
 from ..linalg import stable_order
 from ..registration import closedform_fast, mesh_fast
 from ..registration.result import Registration
@@ -106,10 +105,8 @@ def _field_poses(model, s, g, sign: int, spots: np.ndarray, fit, tier, config: F
     field = model.distance_field
     x3, poses, lookups, q, tried = s.joint_subset(3 * config.coarse_points), [], 0, 0, 0
     for dn, kind in normals:
-        # a one-ring normal changes from vertex to vertex at a sharp place: every vertex of the cells
-        where = spots if kind == "fitted" else cell_mates(model, spots, config.screen_step * s.radius)
-        onto = model.fine_curvatures.normal[where] if kind == "fitted" else model.vertex_normals[where]
-        found = screen(model, g, where, onto, s.curves, dn,
+        onto = model.fine_curvatures.normal[spots] if kind == "fitted" else model.vertex_normals[spots]
+        found = screen(model, g, spots, onto, s.curves, dn,
                        stages=stages, keep=config.screen_keep, extra=context)
         R, tr, grid = field_refine(*field.args(), found.R, found.t, x3, config.field_steps)
         lookups += found.lookups + len(R) * len(x3) * (config.field_steps + 1)

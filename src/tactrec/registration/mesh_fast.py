@@ -90,21 +90,6 @@ def first_per_cell(model: MeshModel, order: np.ndarray, size: float) -> np.ndarr
     return order[np.sort(first)]
 
 
-def cell_mates(model: MeshModel, places: np.ndarray, size: float) -> np.ndarray:
-    """Every vertex in the cells (a grid ``size`` across) of ``places (p,)`` (one place a cell, as
-    :func:`first_per_cell` gives them), cell by cell in the order of ``places``, each cell's place
-    first and the rest by index."""
-    cells = _cells(model, np.arange(len(model.vertices)), size)
-    mine = _cells(model, places, size)
-    order = np.argsort(mine, kind="stable")
-    at = np.clip(np.searchsorted(mine[order], cells), 0, len(mine) - 1)
-    rank = np.where(mine[order][at] == cells, order[at], -1)                # each vertex's cell's rank
-    keep = np.flatnonzero(rank >= 0)
-    own = np.zeros(len(cells), dtype=bool)
-    own[places] = True
-    return keep[np.lexsort((keep, ~own[keep], rank[keep]))]
-
-
 #: the normal tilted four ways (rotation vectors about the frame's first two axes, per radian)
 _TILTS = np.array([[1.0, 0, 0], [-1.0, 0, 0], [0, 1.0, 0], [0, -1.0, 0]])
 
