@@ -378,7 +378,7 @@ class FastMethod:
             room = max(0, int((allowed - work * share - polish) // hop))
             near = [i for i in sorted(state.best, key=lambda i: (state.error(i), i))
                     if i in meshes and state.best[i].ok and state.error(i) <= config.ratio * e1
-                    and spans.get(i, 0.0) >= 0.25 and rounds.get(i, 3) < 3][:min(room, config.polish)]
+                    and rounds.get(i, 3) < 3][:min(room, config.polish)]          # spans stay >= 1/4
             if not near:
                 break
             items = [(state.best[i], spans[i]) for i in near]
