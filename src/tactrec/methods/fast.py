@@ -65,9 +65,10 @@ exact distances.  On a scan's facets, at a sharp or thin place, the exact
 steps from a start a few degrees off settle on a nearby pose that fits a few
 times worse than the truth (their basin is about 2 degrees and 0.2 mm, the
 search's grids are coarser); the grid's step is that basin, so the true pose
-lies in the basin of one of its starts.  A round that does not halve a
-pose's error halves its grid, down to a quarter, and a pose takes three
-rounds at the most.  On noisy data a stall's
+lies in the basin of one of its starts.  A round that finds nothing better
+ends the pose's grid (its nodes' basins cover its span; a finer grid covers
+less); one that lowers the error but not by half halves the grid, and a
+pose takes three rounds at the most.  On noisy data a stall's
 error lies within what the noise allows, and a best pose beyond it is a
 miss elsewhere, which no local search mends (on the hard touches of
 ``tactrec bench fast-vs-paper`` it mended none of 55 and cost twice the p95).  ``among`` limits a search
@@ -376,9 +377,9 @@ class FastMethod:
             if not (np.isfinite(e1) and e1 > state.plausible):
                 break
             room = max(0, int((allowed - work * share - polish) // hop))
-            near = [i for i in sorted(state.best, key=lambda i: (state.error(i), i))
-                    if i in meshes and state.best[i].ok and state.error(i) <= config.ratio * e1
-                    and rounds.get(i, 3) < 3][:min(room, config.polish)]          # spans stay >= 1/4
+            leading = [i for i in sorted(state.best, key=lambda i: (state.error(i), i))
+                       if i in meshes and state.best[i].ok and state.error(i) <= config.ratio * e1][:config.polish]
+            near = [i for i in leading if rounds.get(i, 3) < 3][:room]                # spans stay >= 1/4
             if not near:
                 break
             items = [(state.best[i], spans[i]) for i in near]

@@ -243,9 +243,10 @@ def _polished(held, indices, touch, config: FastConfig, fresh: bool, registratio
 def hop_cost(config: FastConfig, curves: int, points: int) -> int:
     """The closest-point queries of :func:`_hopped` on one model: ``hop_seeds`` grids of
     ``hop_steps**6`` poses, each two steps on ``coarse_points`` points a curve; the best ``2 refine``
-    ``iterations`` steps on all ``points``."""
+    ``iterations`` steps on three times those points, and the best of them as many on all ``points``."""
     grid = config.hop_seeds * config.hop_steps ** 6
-    return int(2 * grid * config.coarse_points * curves + 2 * config.refine * config.iterations * points)
+    refine = 2 * config.refine * 3 * config.coarse_points * curves
+    return int(2 * grid * config.coarse_points * curves + config.iterations * (refine + points))
 
 
 def _hopped(held, indices, touch, config: FastConfig, items: list[tuple[Registration, float]]) -> list[dict]:
@@ -253,8 +254,9 @@ def _hopped(held, indices, touch, config: FastConfig, items: list[tuple[Registra
     about its pose and its best alternatives (``hop_seeds`` in all): a grid of turns and shifts about
     the contact's image (:func:`tactrec.engine.screen.local_poses`, ``hop_steps`` values of each of
     the six, ``span`` x ``hop_angle`` degrees and ``span`` x ``hop_shift`` x the touch's radius
-    out), every pose two exact steps on a few points a
-    curve, the best ``2 refine`` then ``iterations`` steps on all points; kept where the error falls.
+    out), every pose two exact steps on a few points a curve, the best ``2 refine`` then
+    ``iterations`` steps on three times as many (as a tier's refinement), and the best of those as
+    many on all points; kept where the error falls.
     The grid's step is the exact steps' basin (a start a degree or two and a tenth of a millimetre
     off reaches the fit; from farther on a scan's facets the steps settle on a nearby pose that
     fits a few times worse), so one of its poses lies in the true pose's basin when the search
@@ -274,14 +276,16 @@ def _hopped(held, indices, touch, config: FastConfig, items: list[tuple[Registra
         R, tr, first, q1 = solve(t.exact(model, config.coarse_points), R, tr, t.joint_subset(config.coarse_points),
                                  Criteria(2, tolerance=config.tolerance, predict=True))
         best = stable_order(first)[:2 * config.refine]
-        R, tr, error, q2 = solve(t.exact(model), R[best], tr[best], t.joint_points,
-                                 Criteria(config.iterations, tolerance=config.tolerance, history=config.history))
+        steps = Criteria(config.iterations, tolerance=config.tolerance, history=config.history)
+        R, tr, error, q2 = solve(t.exact(model, 3 * config.coarse_points), R[best], tr[best],
+                                 t.joint_subset(3 * config.coarse_points), steps)
         b = int(stable_order(error)[0])
+        R, tr, error, q3 = solve(t.exact(model), R[b:b + 1], tr[b:b + 1], t.joint_points, steps)
         better = r
-        if error[b] < r.error:
-            better = dataclasses.replace(_registration(model, t, R[b], tr[b], error[b], r.normal_sign),
+        if error[0] < r.error:
+            better = dataclasses.replace(_registration(model, t, R[0], tr[0], error[0], r.normal_sign),
                                          alternatives=r.alternatives, candidates=r.candidates)
-        out.append({"registration": better, "queries": q1 + q2})
+        out.append({"registration": better, "queries": q1 + q2 + q3})
     return out
 
 
