@@ -39,17 +39,16 @@ def test_an_offset_sphere_is_the_sphere_of_radius_plus_the_tip(sphere):
         assert abs(np.median(own) * RADIUS + 1) < 0.02
         np.testing.assert_allclose(offset, own / (1 - TIP * own))
     field = view.distance_field
-    assert field.spacing == sphere.distance_field.spacing and field.truncation == sphere.distance_field.truncation
     rng = np.random.default_rng(0)
     u = rng.normal(size=(4000, 3))
     u /= np.linalg.norm(u, axis=1, keepdims=True)
-    d = rng.uniform(-0.8, 0.8, 4000) * field.truncation
+    d = rng.uniform(-0.8, 0.8, 4000) * field.band
     p = u * (RADIUS + TIP + d)[:, None]
     error = np.abs(field.signed(p) - d)
     # the mesh's own distance is off the round sphere's by its facets' sag (h^2 / 8R): about 0.03 here
     assert np.median(error) < 0.05 and np.max(error) < 0.15
-    # far from the offset surface (on the mesh itself, or the centre) the field is its truncation
-    np.testing.assert_array_equal(field.distance(np.array([[0.0, 0.0, RADIUS], [0.0, 0.0, 0.0]])), field.truncation)
+    # far from the offset surface (the centre) the field is its band
+    np.testing.assert_array_equal(field.distance(np.array([[0.0, 0.0, 0.0]])), field.band)
     # its exact distances and planes are the offset's: the mesh's minus the tip, along the mesh's planes
     sd, n = view.planes(p)
     own_sd, own_n = sphere.planes(p)
@@ -76,8 +75,8 @@ def test_the_brick_pre_filter_keeps_every_brick_the_full_sampling_keeps(sphere, 
 
 
 def test_a_database_stores_the_offset_fields_of_its_tips(tmp_path, sphere, capsys):
-    """``tactrec build --tip-radius`` stores each mesh's offset field: loaded, it is the one built, a
-    radius not stored is built on first use, and a rebuild with other radii rebuilds the mesh."""
+    """``tactrec build --tip-radius`` stores each mesh's offset field: loaded, it is the one built, and
+    a rebuild with other radii rebuilds the mesh."""
     path = tmp_path / "ball.ply"
     trimesh.Trimesh(sphere.vertices, sphere.faces).export(path)
     db = tmp_path / "db"
@@ -91,7 +90,6 @@ def test_a_database_stores_the_offset_fields_of_its_tips(tmp_path, sphere, capsy
         np.testing.assert_array_equal(a, b)
     view = model.offset(TIP)
     np.testing.assert_array_equal(view.distance_field.bricks, built.bricks)
-    assert model.offset(1.0).distance_field.truncation == built.truncation                    # built now
     assert build_database([path], db, quiet=True, tips=[2.0, TIP]).reused == ["ball"]
     assert build_database([path], db, quiet=True, tips=[1.0]).built == ["ball"]
     assert main(["build", str(path), "--out", str(tmp_path / "bad"), "--tip-radius", "-1"]) == 2
@@ -139,3 +137,32 @@ def test_the_places_of_one_offset_never_serve_another():
         np.testing.assert_array_equal(got, alone)
         found.append(got)
     assert not np.array_equal(found[0], found[1]) and not np.array_equal(found[0], found[2])
+
+
+@pytest.mark.parametrize("tip", [0.5, TIP, 9.0, 14.0])
+def test_a_tip_reads_the_offset_within_its_band_and_builds_nothing_up_to_the_reach(tmp_path, sphere, monkeypatch,
+                                                                                    tip):
+    """On a database built with no tip radius, a tip up to the reach (10 mm) reads its offset's field
+    from what the database stores, building nothing: its distances are those of the sphere of 20 + r
+    across the field's band (within the interpolation of its cells and the facets' kinks).  A larger
+    tip's field is built on first use."""
+    import tactrec.surfaces.mesh_offset as mesh_offset
+    from tactrec.surfaces.mesh_offset import REACH
+
+    path = tmp_path / "ball.ply"
+    trimesh.Trimesh(sphere.vertices, sphere.faces).export(path)
+    build_database([path], tmp_path / "db", quiet=True)
+    model = load_database(tmp_path / "db").entries[0].model
+    built = []
+    monkeypatch.setattr(mesh_offset, "build_field", lambda *a, **k: built.append(k) or build_field(*a, **k))
+    field = model.offset(tip).distance_field
+    assert (len(built) > 0) == (tip > REACH)
+    rng = np.random.default_rng(3)
+    u = rng.normal(size=(4000, 3))
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    d = rng.uniform(-0.8, 0.8, 4000) * field.band
+    p = u * (RADIUS + tip + d)[:, None]
+    exact = model.offset(tip).planes(p)[0]                     # the mesh's distance less the tip
+    assert field.band >= 0.5 * model.distance_field.truncation
+    error = np.abs(field.signed(p) - exact)
+    assert np.median(error) < 0.02 and np.max(error) < 0.06

@@ -276,8 +276,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, metavar="DB", help="database folder")
     _mesh_options(p)
     p.add_argument("--tip-radius", type=float, nargs="+", metavar="R",
-                   help="store each mesh's field offset by these tip radii (the meshes' units), so that "
-                   "touches of such a tip need not build it on first use")
+                   help="also store each mesh's field offset by these tip radii (the meshes' units), at the "
+                   "mesh's own spacing; any tip up to 10 mm is read from the stored fields without a build")
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
     p.set_defaults(func=cmd_build)
 

@@ -38,6 +38,9 @@ FORMAT = "tactrec-db"
 VERSION = 3            # 2: meshes store their fitted normals; 3: and their distance fields (the engine's screen)
 #: bump when table construction changes, so that old tables are rebuilt
 TABLE_VERSION = 2
+#: bump when what a model stores besides its table changes, so that a build redoes it (a database
+#: of an older one still loads: what it lacks is made on first use); 2: a mesh's outer field
+STORE_VERSION = 2
 
 
 @dataclasses.dataclass
@@ -187,13 +190,16 @@ def load_database(path: str | os.PathLike, *, warn=None) -> Database:
 
 def _stored_blob(model, tips=()) -> tuple[bytes, int]:
     """A model's database file (its arrays and its table, compressed) and its table's rows; a mesh's
-    with the fields of its offsets by the tip radii ``tips`` (:mod:`tactrec.surfaces.mesh_offset`)."""
+    with its outer field and the fields of its offsets by the tip radii ``tips``
+    (:mod:`tactrec.surfaces.mesh_offset`)."""
     entry = model_entry(model)
     arrays = dict(model.to_store(), **entry.table.to_arrays())
-    if tips and model.kind == "mesh":
-        from .surfaces.mesh_offset import offset_arrays
+    if model.kind == "mesh":
+        from .surfaces.mesh_offset import offset_arrays, outer_arrays
 
-        arrays.update(offset_arrays(model, tips))
+        arrays.update(outer_arrays(model))
+        if tips:
+            arrays.update(offset_arrays(model, tips))
     buffer = io.BytesIO()
     np.savez_compressed(buffer, **arrays)
     return buffer.getvalue(), len(entry.table)
@@ -278,6 +284,7 @@ def build_database(models: Iterable, out: str | os.PathLike, *, quiet: bool = Fa
             options["tips"] = tips
         prev = old.get(model.name)
         fresh = not (prev and prev["source_sha256"] == sha and prev.get("table_version") == TABLE_VERSION
+                     and prev.get("store_version", 1) == STORE_VERSION
                      and prev.get("options", {}) == options
                      and (out / prev["file"]).is_file()
                      and file_sha256(out / prev["file"]) == prev["file_sha256"])
@@ -296,7 +303,7 @@ def build_database(models: Iterable, out: str | os.PathLike, *, quiet: bool = Fa
         items.append({
             "name": model.name, "kind": model.kind, "units": model.units, "options": options, "file": name,
             "source": str(src.path), "source_sha256": sha, "file_sha256": hashlib.sha256(blob).hexdigest(),
-            "table_rows": rows, "table_version": TABLE_VERSION,
+            "table_rows": rows, "table_version": TABLE_VERSION, "store_version": STORE_VERSION,
             "builtin": src.builtin,
         })
         built.append(model.name)

@@ -233,8 +233,8 @@ class Recognizer:
         (:data:`~tactrec.probability.UNKNOWN_PRIOR`; 0: a closed world).
     tips : iterable of float
         Radii of round tips (the models' units) whose offset fields every mesh prepares now, before
-        the workers fork (:mod:`tactrec.surfaces.mesh_offset`; a database built with them stores
-        them), so that no recognition builds them.
+        the workers fork (:mod:`tactrec.surfaces.mesh_offset`: read from the stored fields up to
+        10 mm, built beyond), so that no recognition reads or builds them.
     **options
         The method's options (its :class:`~tactrec.methods.base.Config`); a name it does not
         know is an :class:`~tactrec.errors.InputError`.

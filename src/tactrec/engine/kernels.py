@@ -9,6 +9,9 @@ The field is the sparse brick grid of :class:`tactrec.surfaces.mesh_field.Distan
 (-1: none, every cell at least the truncation away), ``bricks (nb, BRICK + 1,
 BRICK + 1, BRICK + 1) int16`` hold the signed distance at the cells' corners
 in units of ``quantum``; a point outside every brick is ``truncation`` away.
+A field's ``shift`` is subtracted from every sample: the field of the
+surface offset outward by that much, read from the same bricks
+(:meth:`tactrec.surfaces.mesh_field.DistanceField.shifted`).
 """
 
 from __future__ import annotations
@@ -48,8 +51,9 @@ def _cell(index, origin, inv_h, x, y, z):
 
 
 @njit(cache=True, nogil=True)
-def _sample(index, bricks, origin, inv_h, quantum, truncation, x, y, z):
-    """Signed distance at one point by trilinear interpolation; ``truncation`` outside every brick."""
+def _sample(index, bricks, origin, inv_h, quantum, truncation, shift, x, y, z):
+    """Signed distance at one point by trilinear interpolation, less ``shift``, within ``truncation``
+    (``truncation`` outside every brick)."""
     b, lx, ly, lz, fx, fy, fz = _cell(index, origin, inv_h, x, y, z)
     if b < 0:
         return truncation
@@ -60,12 +64,24 @@ def _sample(index, bricks, origin, inv_h, quantum, truncation, x, y, z):
     c11 = c[lx, ly + 1, lz + 1] * (1.0 - fx) + c[lx + 1, ly + 1, lz + 1] * fx
     c0 = c00 * (1.0 - fy) + c10 * fy
     c1 = c01 * (1.0 - fy) + c11 * fy
-    return (c0 * (1.0 - fz) + c1 * fz) * quantum
+    return _within((c0 * (1.0 - fz) + c1 * fz) * quantum - shift, truncation)
 
 
 @njit(cache=True, nogil=True)
-def _sample_gradient(index, bricks, origin, inv_h, quantum, truncation, x, y, z, out):
-    """Signed distance at one point and its gradient (into ``out (3,)``; zero outside every brick)."""
+def _within(d, truncation):
+    """``d`` clipped to ``[-truncation, truncation]`` (a shifted field's band is narrower than its
+    samples')."""
+    if d > truncation:
+        return truncation
+    if d < -truncation:
+        return -truncation
+    return d
+
+
+@njit(cache=True, nogil=True)
+def _sample_gradient(index, bricks, origin, inv_h, quantum, truncation, shift, x, y, z, out):
+    """Signed distance at one point less ``shift`` and its gradient (into ``out (3,)``; zero outside
+    every brick, and where the distance is clipped to ``truncation``)."""
     out[0] = 0.0
     out[1] = 0.0
     out[2] = 0.0
@@ -92,25 +108,32 @@ def _sample_gradient(index, bricks, origin, inv_h, quantum, truncation, x, y, z,
               + ((v101 - v001) * (1.0 - fy) + (v111 - v011) * fy) * fz) * s
     out[1] = (c10 - c00) * (1.0 - fz) * s + (c11 - c01) * fz * s
     out[2] = (c1 - c0) * s
-    return (c0 * (1.0 - fz) + c1 * fz) * quantum
+    d = (c0 * (1.0 - fz) + c1 * fz) * quantum - shift
+    if abs(d) >= truncation:
+        out[0] = 0.0
+        out[1] = 0.0
+        out[2] = 0.0
+        return _within(d, truncation)
+    return d
 
 
 @njit(cache=True, parallel=True)
-def field_lookup(index, bricks, origin, inv_h, quantum, truncation, points):
+def field_lookup(index, bricks, origin, inv_h, quantum, truncation, shift, points):
     """Signed, truncated distances ``(m,)`` of ``points (m, 3)``."""
     out = np.empty(points.shape[0])
     for i in prange(points.shape[0]):
-        out[i] = _sample(index, bricks, origin, inv_h, quantum, truncation, points[i, 0], points[i, 1], points[i, 2])
+        out[i] = _sample(index, bricks, origin, inv_h, quantum, truncation, shift,
+                         points[i, 0], points[i, 1], points[i, 2])
     return out
 
 
 @njit(cache=True, parallel=True)
-def field_gradient(index, bricks, origin, inv_h, quantum, truncation, points):
+def field_gradient(index, bricks, origin, inv_h, quantum, truncation, shift, points):
     """Signed, truncated distances ``(m,)`` of ``points (m, 3)`` and their gradients ``(m, 3)``."""
     d = np.empty(points.shape[0])
     g = np.zeros((points.shape[0], 3))
     for i in prange(points.shape[0]):
-        d[i] = _sample_gradient(index, bricks, origin, inv_h, quantum, truncation,
+        d[i] = _sample_gradient(index, bricks, origin, inv_h, quantum, truncation, shift,
                                 points[i, 0], points[i, 1], points[i, 2], g[i])
     return d, g
 
@@ -132,7 +155,7 @@ def screen_rotations(local, count):
 
 
 @njit(cache=True, parallel=True)
-def field_best(index, bricks, origin, inv_h, quantum, truncation, frames, places, turned):
+def field_best(index, bricks, origin, inv_h, quantum, truncation, shift, frames, places, turned):
     """The screen: at each place, the rotation whose data lie nearest the surface.
 
     ``frames (n, 3, 3)`` (columns: two tangents and the outward normal of each place),
@@ -161,7 +184,7 @@ def field_best(index, bricks, origin, inv_h, quantum, truncation, frames, places
                 x = F[0, 0] * a + F[0, 1] * b + F[0, 2] * c + px
                 y = F[1, 0] * a + F[1, 1] * b + F[1, 2] * c + py
                 z = F[2, 0] * a + F[2, 1] * b + F[2, 2] * c + pz
-                total += abs(_sample(index, bricks, origin, inv_h, quantum, truncation, x, y, z))
+                total += abs(_sample(index, bricks, origin, inv_h, quantum, truncation, shift, x, y, z))
             if total < best:
                 best = total
                 arg = j
@@ -286,7 +309,7 @@ def _turn(step, dR, tmp, R, t, Ro, to):
 
 
 @njit(cache=True, parallel=True)
-def field_refine(index, bricks, origin, inv_h, quantum, truncation, R, t, x, iterations):
+def field_refine(index, bricks, origin, inv_h, quantum, truncation, shift, R, t, x, iterations):
     """Point-to-plane Gauss-Newton (damped) on the field: poses ``R (h, 3, 3), t (h, 3)`` of data
     ``x (m, 3)`` take ``iterations`` steps, each linearising the signed distances about the pose
     (planes normal to the field's gradient).  Points beyond the truncation take no part in a step.
@@ -315,7 +338,7 @@ def field_refine(index, bricks, origin, inv_h, quantum, truncation, R, t, x, ite
                 y0 = Ri[0, 0] * x[k, 0] + Ri[0, 1] * x[k, 1] + Ri[0, 2] * x[k, 2] + ti[0]
                 y1 = Ri[1, 0] * x[k, 0] + Ri[1, 1] * x[k, 1] + Ri[1, 2] * x[k, 2] + ti[1]
                 y2 = Ri[2, 0] * x[k, 0] + Ri[2, 1] * x[k, 1] + Ri[2, 2] * x[k, 2] + ti[2]
-                d = _sample_gradient(index, bricks, origin, inv_h, quantum, truncation, y0, y1, y2, g)
+                d = _sample_gradient(index, bricks, origin, inv_h, quantum, truncation, shift, y0, y1, y2, g)
                 if abs(d) < truncation:
                     _add_plane(y0, y1, y2, g[0], g[1], g[2], d, J, A, b)
             if not _damped_solve(A, b, step):
@@ -326,7 +349,7 @@ def field_refine(index, bricks, origin, inv_h, quantum, truncation, R, t, x, ite
             y0 = Ri[0, 0] * x[k, 0] + Ri[0, 1] * x[k, 1] + Ri[0, 2] * x[k, 2] + ti[0]
             y1 = Ri[1, 0] * x[k, 0] + Ri[1, 1] * x[k, 1] + Ri[1, 2] * x[k, 2] + ti[1]
             y2 = Ri[2, 0] * x[k, 0] + Ri[2, 1] * x[k, 1] + Ri[2, 2] * x[k, 2] + ti[2]
-            total += abs(_sample(index, bricks, origin, inv_h, quantum, truncation, y0, y1, y2))
+            total += abs(_sample(index, bricks, origin, inv_h, quantum, truncation, shift, y0, y1, y2))
         score[i] = total / m
     return Ro, to, score
 
@@ -371,7 +394,7 @@ def warm() -> None:
     from .anderson import anderson
 
     field = (np.full((1, 1, 1), -1, dtype=np.int32), np.zeros((1, BRICK + 1, BRICK + 1, BRICK + 1), dtype=np.int16),
-             np.zeros(3), 1.0, 1.0, 1.0)
+             np.zeros(3), 1.0, 1.0, 1.0, 0.0)
     points = np.zeros((2, 3))
     eye = np.ascontiguousarray(np.broadcast_to(np.eye(3), (2, 3, 3)))
     field_lookup(*field, points)

@@ -141,6 +141,9 @@ class MeshModel(SurfaceModel):
             if radii.ndim != 1 or not np.all(np.isfinite(radii) & (radii > 0)) or not all(
                     f"offset{i}_{key}" in arrays for i in range(len(radii)) for key in DistanceField.KEYS):
                 raise ValueError("the stored offset fields are malformed")
+        if any(f"outer_{key}" in arrays for key in DistanceField.KEYS) and not all(
+                f"outer_{key}" in arrays for key in DistanceField.KEYS + ("offset",)):
+            raise ValueError("the stored outer field is malformed")
         model._stored_field = arrays            # read when first used: a database loads in a moment
         return model
 
@@ -267,6 +270,13 @@ class MeshModel(SurfaceModel):
         if stored is not None:
             return DistanceField.from_store(stored)
         return build_field(self.vertices, self.faces, mean_edge=self.mean_edge)
+
+    @cached_property
+    def outer_field(self) -> DistanceField:
+        """The field a tip's search reads beyond this field's band (:func:`.mesh_offset.outer_field`)."""
+        from .mesh_offset import outer_field
+
+        return outer_field(self)
 
     @cached_property
     def _offsets(self) -> dict:

@@ -55,6 +55,9 @@ class DistanceField:
         Brick of each block of ``BRICK`` cells, -1 where none is stored.
     bricks : (nb, BRICK + 1, BRICK + 1, BRICK + 1) int16
         Signed distances at the cells' corners, in units of :attr:`quantum`.
+    shift : float
+        Subtracted from every sample: the field of the surface offset outward by ``shift``, read
+        from the same bricks (:meth:`shifted`); 0 for the field as sampled.
     """
 
     #: the names it is stored under (:meth:`to_store`)
@@ -65,10 +68,27 @@ class DistanceField:
     truncation: float
     index: np.ndarray
     bricks: np.ndarray
+    shift: float = 0.0
 
     @property
     def quantum(self) -> float:
         return self.truncation / _Q
+
+    @property
+    def band(self) -> float:
+        """How far from its surface the field reads true distances: the truncation less the shift."""
+        return self.truncation - abs(self.shift)
+
+    def shifted(self, by: float) -> "DistanceField":
+        """The field of the surface offset outward by ``by`` (inward where negative), read from these
+        bricks: every sample less ``by``, within the band the shift leaves (:attr:`band`).  The
+        trilinear interpolation of ``d - by`` is that of ``d`` less ``by``, so within that band it is
+        the field a build of the offset would sample on this grid.  ``ValueError`` where the shift
+        leaves no band."""
+        field = dataclasses.replace(self, shift=self.shift + float(by))
+        if not field.band > 0:
+            raise ValueError(f"a shift of {field.shift:g} leaves no band of a field truncated at {self.truncation:g}")
+        return field
 
     @property
     def nbytes(self) -> int:
@@ -76,7 +96,7 @@ class DistanceField:
 
     def args(self) -> tuple:
         """The arguments every kernel of :mod:`tactrec.engine.kernels` takes first."""
-        return (self.index, self.bricks, self.origin, 1.0 / self.spacing, self.quantum, self.truncation)
+        return (self.index, self.bricks, self.origin, 1.0 / self.spacing, self.quantum, self.band, self.shift)
 
     def signed(self, points: np.ndarray) -> np.ndarray:
         """Signed, truncated distances of ``points (..., 3)``, shape ``(...)``."""
@@ -90,6 +110,8 @@ class DistanceField:
         return np.abs(self.signed(points))
 
     def to_store(self) -> dict[str, np.ndarray]:
+        if self.shift:
+            raise ValueError("a shifted field is read from its source's bricks; store the source")
         return {"field_origin": self.origin, "field_spacing": np.array(self.spacing),
                 "field_truncation": np.array(self.truncation), "field_index": self.index,
                 "field_bricks": self.bricks}
