@@ -74,7 +74,8 @@ class Recognition:
     touch : Touch or None
         The touch as recognition saw it (points, estimate, noise), for callers that go on with it.
     allowed : int or None
-        The most work the search could spend (``fast``: its budget; None for a method without one).
+        The most work the search's schedule could spend (``fast``: its budget, its grids about a
+        stall up to as much again; None for a method without one).
     unknown_prior : float
         The prior probability that the touch came from none of the models (:mod:`tactrec.probability`).
     """

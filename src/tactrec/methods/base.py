@@ -70,7 +70,8 @@ class SearchOutcome:
     depth : int
         How many steps of its schedule the search ran (1 for a method without one).
     allowed : int or None
-        The most work the search could spend (its budget; None for a method without one).
+        The most work the search's schedule could spend (its budget; None for a method without
+        one).  ``fast``'s grids about a stall on noise-free data spend up to as much again.
     """
 
     ranking: list

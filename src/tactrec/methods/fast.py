@@ -54,10 +54,11 @@ still refines it): on noisy data the true pose's error lies above the fit
 limit about half the time, and such a search went on through the leader's
 deepest tiers for nothing.  Else it stops when nothing is left.
 
-When the tiers end and the best error is still beyond a plausible fit of
-data whose noise lies below the fit floor (``floor`` x the touch's radius),
-the fit test steers the budget that is left (:func:`~.fast_stages._hopped`): the
-leading poses (within ``ratio`` of the best, at most ``polish`` models) are
+Before each round, while the best error is beyond a plausible fit of data
+whose noise lies below the fit floor (``floor`` x the touch's radius), the
+fit test steers the search (:meth:`FastMethod._grids`): the leader's pose,
+and when the tiers end the leading poses (within ``ratio`` of the best, at
+most ``polish`` models), each pose once, are
 searched again about themselves, each with its best alternative, on a grid
 of ``hop_steps`` turns and shifts in each of the six directions, ``hop_angle``
 degrees and ``hop_shift`` x the touch's radius out, every pose refined on
@@ -68,11 +69,17 @@ search's grids are coarser); the grid's step is that basin, so the true pose
 lies in the basin of one of its starts.  A round that finds nothing better
 ends the pose's grid (its nodes' basins cover its span; a finer grid covers
 less); one that lowers the error but not by half halves the grid, and a
-pose takes three rounds at the most.  On noisy data a stall's
-error lies within what the noise allows, and a best pose beyond it is a
-miss elsewhere, which no local search mends (on the hard touches of
-``tactrec bench fast-vs-paper`` it mended none of 55 and cost twice the p95).  ``among`` limits a search
-to chosen models (the budget counts those alone).  It also stops before a round whose estimated cost would take the
+pose takes three rounds at the most.  A stall found in the first tier is so
+mended before the deeper tiers run on every model (on the other-source P3
+touches of ``tactrec bench fast-vs-paper`` the grids after the last tier
+alone left 54 of 140 touches to run the tilted tier).  The grids' work is
+counted apart from the tiers' budget, within as much again: charged to it,
+they took the tilted tier's room from touches that need it.  On noisy data
+a stall's error lies within what the noise allows, and a best pose beyond it
+is a miss elsewhere, which no local search mends (on the hard touches of
+``tactrec bench fast-vs-paper`` it mended none of 55 and cost twice the
+p95).  ``among`` limits a search to chosen models (the budget counts those
+alone).  It also stops before a round whose estimated cost would take the
 work (closest-point queries) past ``budget`` per model; such a search is
 reported as not settled (the budget counts per model and per normal tried:
 twice as much without an ``outward`` hint; a caller may give a lower one in
@@ -255,6 +262,7 @@ class _State:
         self.cheapest = {i: np.inf for i in meshes}
         self.deferred = {i: np.inf for i in meshes}
         self.tried = {i: 0 for i in meshes}
+        self.grids: dict[int, tuple] = {}               # each model's grid: the pose it is about, span, rounds
         self.next = {i: 0 for i in meshes}
         self.models, self.counts = models, {}
         self.limit = max(fit_limit(touch, config.floor), touch.fit)      # a caller's joint fit, with a context
@@ -349,7 +357,15 @@ class FastMethod:
         hop = hop_cost(config, len(touch.curves), len(touch.joint_points))          # one model's _hopped
         allowed = config.budget * len(chosen) * signs
         allowed = allowed if budget is None else min(allowed, budget)
+        fine = bool(meshes) and noise_fit(touch.noise) <= config.floor * touch.radius
+        grids = 0                                   # the grids' work, counted apart from the tiers'
+
+        def room(spent: int) -> int:                # the grids' own allowance, as much as the tiers'
+            return int((allowed - spent * share) // hop)
+
         while True:
+            if fine:                                # the fit test steers: the leader's stall is searched about first
+                grids += self._grids(state, meshes, runner, room, grids, 1)
             if state.settled():
                 settled = True
                 break
@@ -367,34 +383,46 @@ class FastMethod:
                 break
             depth = max(depth, k + 1)
             work += self._tier(state, group, k, runner)
-        # the fit test steers what is left: while the best pose lies beyond a plausible fit of data
-        # finer than the fit floor, the leading poses are searched again about themselves (_hopped),
-        # as far as the budget goes; a round that does not halve a pose's error halves its grid, down
-        # to a quarter; three rounds a pose at the most
-        spans, rounds = {i: 1.0 for i in state.best}, {i: 0 for i in state.best}
-        while meshes and noise_fit(touch.noise) <= config.floor * touch.radius:
-            _, e1 = state.leader()
-            if not (np.isfinite(e1) and e1 > state.plausible):
-                break
-            room = max(0, int((allowed - work * share - polish) // hop))
-            leading = [i for i in sorted(state.best, key=lambda i: (state.error(i), i))
-                       if i in meshes and state.best[i].ok and state.error(i) <= config.ratio * e1][:config.polish]
-            near = [i for i in leading if rounds.get(i, 3) < 3][:room]                # spans stay >= 1/4
-            if not near:
-                break
-            items = [(state.best[i], spans[i]) for i in near]
-            for i, found in zip(near, runner.map(_hopped, near, touch, config, items=items)):
-                work += found["queries"]
-                before, rounds[i] = state.error(i), rounds[i] + 1
-                if clearly_less(_error(found["registration"]), before):
-                    state.best[i] = found["registration"]
-                if not _error(found["registration"]) <= 0.5 * before:
-                    spans[i] /= 2.0
+        if fine:                                    # and when the tiers end, the leading models' too
+            grids += self._grids(state, meshes, runner, room, grids, config.polish)
             settled = settled or state.settled()
         top = [i for i in sorted(state.best, key=lambda i: (state.error(i), i)) if state.best[i].ok][:config.polish]
         for i, found in zip(top, runner.map(_polished, top, touch, config, False, items=[state.best[i] for i in top])):
             state.best[i], work = found["registration"], work + found["queries"]
-        return SearchOutcome(self._ranking(state, models), settled, int(work), depth, int(allowed))
+        return SearchOutcome(self._ranking(state, models), settled, int(work + grids), depth, int(allowed))
+
+    @staticmethod
+    def _grids(state: _State, meshes: list[int], runner, room, work: int, models: int) -> int:
+        """While the best pose lies beyond a plausible fit, the leading poses (within ``ratio`` of the
+        best, the ``models`` best models) searched again about themselves (:func:`~.fast_stages._hopped`)
+        as far as ``room(work)`` grids go: a round that finds nothing better ends that pose's grid
+        (its nodes' basins cover its span, and a finer grid covers less); one that lowers the error
+        but not by half halves the grid; three rounds a pose at the most.  A pose a tier finds later
+        takes a grid of its own.  Returns the work."""
+        config, spent = state.config, 0
+        while True:
+            _, e1 = state.leader()
+            if not (np.isfinite(e1) and e1 > state.plausible):
+                break
+            leading = [i for i in sorted(state.best, key=lambda i: (state.error(i), i))
+                       if i in meshes and state.best[i].ok and state.error(i) <= config.ratio * e1][:models]
+            for i in leading:
+                if i not in state.grids or state.grids[i][0] is not state.best[i]:
+                    state.grids[i] = (state.best[i], 1.0, 0)                      # about a pose, its span, rounds
+            near = [i for i in leading if state.grids[i][2] < 3][:max(0, room(work + spent))]
+            if not near:
+                break
+            items = [state.grids[i][:2] for i in near]
+            for i, found in zip(near, runner.map(_hopped, near, state.touch, config, items=items)):
+                spent += found["queries"]
+                before, (_, span, rounds) = state.error(i), state.grids[i]
+                if not clearly_less(_error(found["registration"]), before):
+                    state.grids[i] = (state.best[i], span, 3)
+                    continue
+                state.best[i] = found["registration"]
+                halved = _error(state.best[i]) <= 0.5 * before
+                state.grids[i] = (state.best[i], span if halved else span / 2, rounds + 1)
+        return spent
 
     def refit(self, touch, models, config: FastConfig, runner, outcome: SearchOutcome) -> SearchOutcome:
         """``outcome``, a search of nearly the same points as ``touch`` (a few set aside or taken back),
