@@ -139,9 +139,18 @@ def test_the_places_of_one_offset_never_serve_another():
     assert not np.array_equal(found[0], found[1]) and not np.array_equal(found[0], found[2])
 
 
+@pytest.fixture(scope="module")
+def ball_db(tmp_path_factory, sphere):
+    """A database of the sphere, built with no tip radius."""
+    folder = tmp_path_factory.mktemp("ball")
+    path = folder / "ball.ply"
+    trimesh.Trimesh(sphere.vertices, sphere.faces).export(path)
+    build_database([path], folder / "db", quiet=True)
+    return folder / "db"
+
+
 @pytest.mark.parametrize("tip", [0.5, TIP, 9.0, 14.0])
-def test_a_tip_reads_the_offset_within_its_band_and_builds_nothing_up_to_the_reach(tmp_path, sphere, monkeypatch,
-                                                                                    tip):
+def test_a_tip_reads_the_offset_within_its_band_and_builds_nothing_up_to_the_reach(ball_db, monkeypatch, tip):
     """On a database built with no tip radius, a tip up to the reach (10 mm) reads its offset's field
     from what the database stores, building nothing: its distances are those of the sphere of 20 + r
     across the field's band (within the interpolation of its cells and the facets' kinks).  A larger
@@ -149,10 +158,7 @@ def test_a_tip_reads_the_offset_within_its_band_and_builds_nothing_up_to_the_rea
     import tactrec.surfaces.mesh_offset as mesh_offset
     from tactrec.surfaces.mesh_offset import REACH
 
-    path = tmp_path / "ball.ply"
-    trimesh.Trimesh(sphere.vertices, sphere.faces).export(path)
-    build_database([path], tmp_path / "db", quiet=True)
-    model = load_database(tmp_path / "db").entries[0].model
+    model = load_database(ball_db).entries[0].model                  # a fresh model: nothing read yet
     built = []
     monkeypatch.setattr(mesh_offset, "build_field", lambda *a, **k: built.append(k) or build_field(*a, **k))
     field = model.offset(tip).distance_field

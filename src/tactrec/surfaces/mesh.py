@@ -141,8 +141,9 @@ class MeshModel(SurfaceModel):
             if radii.ndim != 1 or not np.all(np.isfinite(radii) & (radii > 0)) or not all(
                     f"offset{i}_{key}" in arrays for i in range(len(radii)) for key in DistanceField.KEYS):
                 raise ValueError("the stored offset fields are malformed")
-        if any(f"outer_{key}" in arrays for key in DistanceField.KEYS) and not all(
-                f"outer_{key}" in arrays for key in DistanceField.KEYS + ("offset",)):
+        from .mesh_offset import OUTER_KEYS
+
+        if any(key in arrays for key in OUTER_KEYS) and not all(key in arrays for key in OUTER_KEYS):
             raise ValueError("the stored outer field is malformed")
         model._stored_field = arrays            # read when first used: a database loads in a moment
         return model
