@@ -2,7 +2,9 @@
 
 A hypothesis puts the touch's contact on a place of the model (a vertex,
 the best of each grid cell ``step x radius`` across, so that places lie
-about as far apart as a rotation step moves the curves' ends), the data's
+about as far apart as a rotation step moves the curves' ends; in a cell
+whose normals lie tens of degrees apart, on a crest or a thin part, the
+best of each direction of them), the data's
 fitted normal onto the place's fitted normal (both paraboloid fits at one
 scale, :func:`tactrec.registration.mesh_fast.data_curvatures`), and turns the
 data about it in ``rotations`` equal steps.  Each hypothesis is scored by
@@ -48,12 +50,13 @@ class Screen:
     lookups: int
 
 
-def screen_places(model, gap_order: np.ndarray, radius: float, *, step: float) -> np.ndarray:
+def screen_places(model, gap_order: np.ndarray, radius: float, *, step: float, angle: float) -> np.ndarray:
     """The places to screen: of the vertices in the order ``gap_order`` (best curvature match first),
-    the first of each grid cell ``step x radius`` across, in that order."""
-    from ..registration.mesh_fast import first_per_cell
+    the first of each grid cell ``step x radius`` across and of each direction of its normals
+    ``angle`` degrees apart (:func:`tactrec.registration.mesh_fast.first_per_place`), in that order."""
+    from ..registration.mesh_fast import first_per_place
 
-    return first_per_cell(model, gap_order, max(step * radius, 1e-12))
+    return first_per_place(model, gap_order, max(step * radius, 1e-12), angle)
 
 
 def _best_places(best: np.ndarray, keep: int) -> np.ndarray:

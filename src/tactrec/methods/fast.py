@@ -8,7 +8,10 @@ curvature at every rotation, screened on the model's distance field
 the data's, posed by their principal frames (exact vertices and frames,
 which the screen's grid of places and turns can fall between); every other
 place at every rotation on the field: the curvature index orders the
-places, it does not filter them; last, every place again with the data's
+places, it does not filter them.  A field tier's place is a grid cell and a
+direction of the normals in it (:func:`tactrec.engine.screen.screen_places`):
+a cell on a crest or a thin part holds normals tens of degrees apart, and
+each direction is posed on its own.  Last, every place again with the data's
 normal tilted every ``tilt_step`` degrees out to 60, for a contact on a
 sharp or thin feature, where no fit of the curves gives the surface's
 normal (each of its best seeds then set on a dense local grid of turns and
@@ -37,12 +40,13 @@ A tier on a set of models is
    of the way to the fit, for a hundred steps.
 
 The first tier runs on every model.  Each later round runs the next tier of
-the models in contention (:meth:`_State.contending`): those whose best score
+the models in contention (:meth:`State.contending`): those whose best score
 lies within ``ratio`` x the best error (all while the best is not a plausible
-fit, more than ``within`` standard errors above the fit limit: then the true
-pose was missed somewhere, and no model's first tiers rule it out); the
+fit, more than ``within`` standard errors above the fit limit, or on
+noise-free data above the limit itself: then the true pose was missed
+somewhere, and no model's first tiers rule it out); the
 deferred models, shallowest tier first, when none contends.  The search
-stops (:meth:`_State.settled`) when the best error is a *fit*: within what
+stops (:meth:`State.settled`) when the best error is a *fit*: within what
 the data's own noise allows (the mean distance of a perfect fit, ``sigma
 sqrt(2 / pi)``, ``sigma`` from the curves' third differences) or ``floor`` x
 the touch's radius on noise-free data (or, for a touch with a context, the
@@ -52,14 +56,19 @@ standing exceeds by ``ratio``.  No later tier could then change the model,
 only move its pose within what the noise cannot tell apart (the final polish
 still refines it): on noisy data the true pose's error lies above the fit
 limit about half the time, and such a search went on through the leader's
-deepest tiers for nothing.  Else it stops when nothing is left.
+deepest tiers for nothing.  On noise-free data the truth fits orders of
+magnitude within the limit, and a leader above it is a stall, however far
+ahead (on the other-source P3 touches, 4 of the 12 that ended on no fit had
+stopped so, clear between the limit and the noise's allowance).  Else it
+stops when nothing is left.
 
 Before each round, while the best error is beyond a plausible fit of data
 whose noise lies below the fit floor (``floor`` x the touch's radius), the
-fit test steers the search (:meth:`FastMethod._grids`): the leader's pose,
+fit test steers the search (:func:`~tactrec.methods.fast_state.grid_leaders`): the leader's pose,
 and when the tiers end the leading poses (within ``ratio`` of the best, at
-most ``polish`` models), each pose once, are
-searched again about themselves, each with its best alternative, on a grid
+most ``polish`` models), each pose once, first take the final polish's
+steps (a tier's refinement often ends a step or two short of the fit), and
+those still beyond are searched again about themselves, each with its best alternative, on a grid
 of ``hop_steps`` turns and shifts in each of the six directions, ``hop_angle``
 degrees and ``hop_shift`` x the touch's radius out, every pose refined on
 exact distances.  On a scan's facets, at a sharp or thin place, the exact
@@ -109,12 +118,13 @@ import numpy as np
 
 from ..engine import LOOKUP_COST
 from ..linalg import clearly_less
-from ..probability import fit_limit, fit_standard_error, noise_fit
+from ..probability import fit_limit
 from ..registration import closedform_fast, mesh_fast
 from ..registration.result import Registration
 from .base import NOT_SEARCHED, Config, SearchOutcome
 from .common import in_model_units
-from .fast_stages import _cheap, _closed_form, _hopped, _polished, _refined, field_stages, hop_cost, tier_span
+from .fast_stages import _cheap, _closed_form, _polished, _refined, field_stages, hop_cost, tier_span
+from .fast_state import State, error_of, grid_leaders, tier_places
 
 __all__ = ["FastMethod", "FastConfig", "Tier", "TIERS", "tier_cost", "tier_places"]
 
@@ -202,11 +212,6 @@ class FastConfig(Config):
 
 
 # ---------------------------------------------------------------------- the search
-def _error(r: Registration | None) -> float:
-    """A registration's error in the data's units (inf for none)."""
-    return r.error / r.scale if r is not None and r.ok else np.inf
-
-
 def tier_cost(config: FastConfig, k: int, signs: int, places: int, curves: int = 3, context: int = 0) -> int:
     """About how many closest-point queries tier ``k`` costs on one model with ``places`` places, a
     pose scored on ``curves`` curves of the touch (the field's screen also on one point of each of
@@ -239,92 +244,6 @@ def tier_cost(config: FastConfig, k: int, signs: int, places: int, curves: int =
     return int(cheap + config.refine * config.iterations * curves * 3 * config.coarse_points)
 
 
-def tier_places(config: FastConfig, k: int, model, radius: float) -> int:
-    """How many places tier ``k`` takes on a mesh ``model`` for a touch of ``radius`` (model units):
-    its vertices, or in a field tier one a grid cell ``screen_step x radius`` across
-    (:func:`tactrec.engine.screen.screen_places`): a surface of area ``A`` meets about ``1.5 A /
-    size^2`` cells (the mean of ``|n_x| + |n_y| + |n_z|`` over directions), and no more cells than
-    it has vertices."""
-    vertices = len(model.vertices)
-    if config.tiers[k].rotations != "field":
-        return vertices
-    size = max(config.screen_step * radius, 1e-12)
-    return min(vertices, int(np.ceil(1.5 * model.area / size ** 2)))
-
-
-class _State:
-    """What the search knows: each model's best registration, best cheap score and next tier."""
-
-    def __init__(self, touch, models, meshes, config: FastConfig):
-        self.touch, self.config = touch, config
-        self.best: dict[int, Registration] = {}
-        self.rejected: dict[int, str] = {}
-        self.cheapest = {i: np.inf for i in meshes}
-        self.deferred = {i: np.inf for i in meshes}
-        self.tried = {i: 0 for i in meshes}
-        self.grids: dict[int, tuple] = {}               # each model's grid: the pose it is about, span, rounds
-        self.next = {i: 0 for i in meshes}
-        self.models, self.counts = models, {}
-        self.limit = max(fit_limit(touch, config.floor), touch.fit)      # a caller's joint fit, with a context
-        # a best error this far above the limit may still be a fit under the noise; beyond it the true
-        # pose was missed somewhere, and no model's first tiers rule it out
-        self.plausible = self.limit + config.within * fit_standard_error(self.limit, len(touch.joint_points))
-
-    def places(self, i: int, k: int) -> int:
-        """How many places tier ``k`` takes on model ``i`` (:func:`tier_places`), for this touch."""
-        if (i, k) not in self.counts:
-            model = self.models[i].model
-            self.counts[i, k] = tier_places(self.config, k, model, in_model_units(self.touch, model).radius)
-        return self.counts[i, k]
-
-    def error(self, i: int) -> float:
-        return _error(self.best.get(i))
-
-    def standing(self, i: int) -> float:
-        """The best score known on model ``i`` (data units): its best refined error, or the cheap
-        score of a pose deferred unrefined, whichever is lower."""
-        return min(self.error(i), self.deferred.get(i, np.inf))
-
-    def leader(self) -> tuple[int | None, float]:
-        ranked = sorted(self.best, key=lambda i: (self.error(i), i))
-        return (ranked[0], self.error(ranked[0])) if ranked else (None, np.inf)
-
-    def waiting(self) -> list[int]:
-        return [i for i in self.next if i not in self.rejected and self.next[i] < len(self.config.tiers)]
-
-    def clear(self) -> bool:
-        """Whether the best is a plausible fit (within ``within`` standard errors of the fit limit) and
-        every other model's standing lies beyond ``ratio`` x its error."""
-        leader, e1 = self.leader()
-        if leader is None or not np.isfinite(e1) or e1 > self.plausible:
-            return False
-        return all(self.standing(i) > self.config.ratio * e1 for i in set(self.cheapest) | set(self.best)
-                   if i != leader)
-
-    def contending(self) -> list[int]:
-        """The models whose next tier runs in this round (the search has not settled, so the best is
-        not clear): those whose standing lies within ``ratio`` x the best error (every model while
-        nothing fits plausibly); when none does, the deferred ones whose next tier is the shallowest."""
-        waiting = self.waiting()
-        _, e1 = self.leader()
-        if not np.isfinite(e1) or e1 > self.plausible:
-            near = waiting
-        else:
-            near = [i for i in waiting if self.standing(i) <= self.config.ratio * max(e1, self.limit)]
-        if near:
-            return near
-        shallowest = min((self.next[i] for i in waiting), default=None)
-        return [i for i in waiting if self.next[i] == shallowest]
-
-    def settled(self) -> bool:
-        """Whether the search may stop: the best error is a fit (within the data's noise, or ``floor``
-        x the touch's radius), or the best is clear of the others (:meth:`clear`)."""
-        leader, e1 = self.leader()
-        if leader is None or not np.isfinite(e1):
-            return False
-        return bool(e1 <= self.limit or self.clear())
-
-
 class FastMethod:
     """The ``fast`` method (see the module text)."""
 
@@ -347,7 +266,7 @@ class FastMethod:
         chosen = range(len(models)) if among is None else sorted(among)
         meshes = [i for i in chosen if models[i].model.kind == "mesh"]
         others = [i for i in chosen if models[i].model.kind != "mesh"]
-        state = _State(touch, models, meshes, config)
+        state = State(touch, models, meshes, config)
         work, settled, depth = 0, False, 0
         for i, found in zip(others, runner.map(_closed_form, others, touch, config)):
             state.best[i], work = found["registration"], work + found["queries"]
@@ -357,7 +276,7 @@ class FastMethod:
         hop = hop_cost(config, len(touch.curves), len(touch.joint_points))          # one model's _hopped
         allowed = config.budget * len(chosen) * signs
         allowed = allowed if budget is None else min(allowed, budget)
-        fine = bool(meshes) and noise_fit(touch.noise) <= config.floor * touch.radius
+        fine = bool(meshes) and state.noise_free
         grids = 0                                   # the grids' work, counted apart from the tiers'
 
         def room(spent: int) -> int:                # the grids' own allowance, as much as the tiers'
@@ -365,7 +284,7 @@ class FastMethod:
 
         while True:
             if fine:                                # the fit test steers: the leader's stall is searched about first
-                grids += self._grids(state, meshes, runner, room, grids, 1)
+                grids += grid_leaders(state, meshes, runner, room, grids, 1)
             if state.settled():
                 settled = True
                 break
@@ -384,45 +303,12 @@ class FastMethod:
             depth = max(depth, k + 1)
             work += self._tier(state, group, k, runner)
         if fine:                                    # and when the tiers end, the leading models' too
-            grids += self._grids(state, meshes, runner, room, grids, config.polish)
+            grids += grid_leaders(state, meshes, runner, room, grids, config.polish)
             settled = settled or state.settled()
         top = [i for i in sorted(state.best, key=lambda i: (state.error(i), i)) if state.best[i].ok][:config.polish]
         for i, found in zip(top, runner.map(_polished, top, touch, config, False, items=[state.best[i] for i in top])):
             state.best[i], work = found["registration"], work + found["queries"]
         return SearchOutcome(self._ranking(state, models), settled, int(work + grids), depth, int(allowed))
-
-    @staticmethod
-    def _grids(state: _State, meshes: list[int], runner, room, work: int, models: int) -> int:
-        """While the best pose lies beyond a plausible fit, the leading poses (within ``ratio`` of the
-        best, the ``models`` best models) searched again about themselves (:func:`~.fast_stages._hopped`)
-        as far as ``room(work)`` grids go: a round that finds nothing better ends that pose's grid
-        (its nodes' basins cover its span, and a finer grid covers less); one that lowers the error
-        but not by half halves the grid; three rounds a pose at the most.  A pose a tier finds later
-        takes a grid of its own.  Returns the work."""
-        config, spent = state.config, 0
-        while True:
-            _, e1 = state.leader()
-            if not (np.isfinite(e1) and e1 > state.plausible):
-                break
-            leading = [i for i in sorted(state.best, key=lambda i: (state.error(i), i))
-                       if i in meshes and state.best[i].ok and state.error(i) <= config.ratio * e1][:models]
-            for i in leading:
-                if i not in state.grids or state.grids[i][0] is not state.best[i]:
-                    state.grids[i] = (state.best[i], 1.0, 0)                      # about a pose, its span, rounds
-            near = [i for i in leading if state.grids[i][2] < 3][:max(0, room(work + spent))]
-            if not near:
-                break
-            items = [state.grids[i][:2] for i in near]
-            for i, found in zip(near, runner.map(_hopped, near, state.touch, config, items=items)):
-                spent += found["queries"]
-                before, (_, span, rounds) = state.error(i), state.grids[i]
-                if not clearly_less(_error(found["registration"]), before):
-                    state.grids[i] = (state.best[i], span, 3)
-                    continue
-                state.best[i] = found["registration"]
-                halved = _error(state.best[i]) <= 0.5 * before
-                state.grids[i] = (state.best[i], span if halved else span / 2, rounds + 1)
-        return spent
 
     def refit(self, touch, models, config: FastConfig, runner, outcome: SearchOutcome) -> SearchOutcome:
         """``outcome``, a search of nearly the same points as ``touch`` (a few set aside or taken back),
@@ -436,7 +322,7 @@ class FastMethod:
         return dataclasses.replace(outcome, ranking=ranking, work=int(outcome.work + work))
 
     @staticmethod
-    def _tier(state: _State, group: list[int], k: int, runner) -> int:
+    def _tier(state: State, group: list[int], k: int, runner) -> int:
         """Tier ``k`` on the models of ``group``: cheap stage, selection, refinement.  Returns the work."""
         touch, config = state.touch, state.config
         cheap = dict(zip(group, runner.map(_cheap, group, touch, config, k)))
@@ -461,12 +347,12 @@ class FastMethod:
         order = sorted(chosen)
         for i, found in zip(order, runner.map(_refined, order, touch, config, items=[chosen[i] for i in order])):
             work += found["queries"]
-            if clearly_less(_error(found["registration"]), state.error(i)):
+            if clearly_less(error_of(found["registration"]), state.error(i)):
                 state.best[i] = found["registration"]
         return work
 
     @staticmethod
-    def _ranking(state: _State, models) -> list[Registration]:
+    def _ranking(state: State, models) -> list[Registration]:
         ranking = []
         for i, entry in enumerate(models):
             if i in state.best:

@@ -62,7 +62,8 @@ def _screen_places(held, index: int, model, touch, g, sign: int, config: FastCon
         chosen, _ = _places(held, index, model, touch, g, sign, config, True)
         from ..engine.screen import screen_places
 
-        held.cache[key] = screen_places(model, chosen, touch.radius, step=config.screen_step)
+        held.cache[key] = screen_places(model, chosen, touch.radius, step=config.screen_step,
+                                            angle=config.tilt_step)
     return held.cache[key]
 
 
