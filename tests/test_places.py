@@ -53,3 +53,57 @@ def test_every_vertex_lies_near_a_place_in_position_and_normal(shapes, radius):
         if model.name == "sphere":
             cells = len(mesh_fast.first_per_cell(model, order, size))
             assert len(places) == cells
+
+
+def _folded_sites(model, rng, count=5):
+    """Up to ``count`` vertices of ``model`` (seeded) with a vertex within 2 mm whose fitted normal
+    lies more than 60 degrees off their own: an edge, a rim or the side of a thin part."""
+    normals = model.fine_curvatures.normal
+    tree = cKDTree(model.vertices)
+    for v in rng.permutation(len(model.vertices)):
+        near = tree.query_ball_point(model.vertices[v], 2.0)
+        if np.min(normals[near] @ normals[v]) < 0.5:
+            yield int(v)
+
+
+@pytest.mark.slow
+def test_touches_wrapping_thin_parts_and_edges_end_on_a_fit():
+    """20 noise-free P3 touches (24 mm curves, seeded) at the edges and rims of a 2 mm plate, a 2.5
+    mm disc, a 3 mm fin and a block, recognised among the four: every one is right, and at least
+    19 end on a pose within the fit limit (with one place a grid cell, 18 did)."""
+    from tactrec.probability import fit_limit
+    from tactrec.recognition import FLOOR, ModelEntry, Recognizer
+    from tactrec.simulation import simulate_touch
+    from tactrec.tables import CurvatureTable
+
+    shapes = {"plate": trimesh.creation.box((40.0, 30.0, 2.0)),
+              "disc": trimesh.creation.cylinder(radius=20.0, height=2.5, sections=128),
+              "fin": trimesh.creation.box((30.0, 3.0, 24.0)),
+              "block": trimesh.creation.box((40.0, 30.0, 20.0))}
+    entries = []
+    for name, tm in shapes.items():
+        v, f = trimesh.remesh.subdivide_to_size(tm.vertices, tm.faces, max_edge=1.0)
+        tm = trimesh.Trimesh(v, f, process=True)
+        model = MeshModel(tm.vertices, tm.faces, name=name, units="mm")
+        entries.append(ModelEntry(model, CurvatureTable(model.table_samples())))
+    right = fits = touches = 0
+    with Recognizer(entries) as recognizer:
+        for m, entry in enumerate(entries):
+            taken = 0
+            for i, v in enumerate(_folded_sites(entry.model, np.random.default_rng(m))):
+                if taken == 5:
+                    break
+                try:
+                    data = simulate_touch(entry.model, [v], points=81, spacing=0.3, angle=60.0,
+                                          rng=np.random.default_rng([m, i]))
+                except ValueError:             # the curves leave the mesh
+                    continue
+                taken += 1
+                found = recognizer.recognize(data)
+                r = found.registration
+                right += found.best == entry.name
+                fits += bool(r.error / r.scale <= fit_limit(found.touch, FLOOR))
+            touches += taken
+    assert touches == 20
+    assert right == 20
+    assert fits >= 19

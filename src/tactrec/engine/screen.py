@@ -50,13 +50,15 @@ class Screen:
     lookups: int
 
 
-def screen_places(model, gap_order: np.ndarray, radius: float, *, step: float, angle: float) -> np.ndarray:
+def screen_places(model, gap_order: np.ndarray, radius: float, *, step: float, angle: float,
+                  folded: bool = False) -> np.ndarray:
     """The places to screen: of the vertices in the order ``gap_order`` (best curvature match first),
     the first of each grid cell ``step x radius`` across and of each direction of its normals
-    ``angle`` degrees apart (:func:`tactrec.registration.mesh_fast.first_per_place`), in that order."""
+    ``angle`` degrees apart (:func:`tactrec.registration.mesh_fast.first_per_place`), in that order;
+    with ``folded``, those of the cells with more than one direction alone."""
     from ..registration.mesh_fast import first_per_place
 
-    return first_per_place(model, gap_order, max(step * radius, 1e-12), angle)
+    return first_per_place(model, gap_order, max(step * radius, 1e-12), angle, folded=folded)
 
 
 def _best_places(best: np.ndarray, keep: int) -> np.ndarray:

@@ -4,8 +4,12 @@ The hypotheses are (model, place, rotation about the normal, tilt of the
 normal, sign of the normal).  The search takes them in *tiers*
 (:data:`TIERS`), each a step coarse to fine: the best 500 places by
 curvature at every rotation, screened on the model's distance field
-(:mod:`tactrec.engine.screen`); the few places whose curvature best matches
-the data's, posed by their principal frames (exact vertices and frames,
+(:mod:`tactrec.engine.screen`); for a touch whose normals disagree across
+scales (:attr:`tactrec.features.Touch.scales`: it lies on a sharp, thin or
+folded place, where no fit reads the curvature), the best 500 *folded*
+places, cells whose normals lie more than ``tilt_step`` degrees apart; the
+few places whose curvature best matches the data's, posed by their
+principal frames (exact vertices and frames,
 which the screen's grid of places and turns can fall between); every other
 place at every rotation on the field: the curvature index orders the
 places, it does not filter them.  A field tier's place is a grid cell and a
@@ -132,7 +136,8 @@ __all__ = ["FastMethod", "FastConfig", "Tier", "TIERS", "tier_cost", "tier_place
 @dataclasses.dataclass(frozen=True)
 class Tier:
     """One step of the schedule: the best ``places`` places per model and normal (None: every
-    vertex), posed by their principal ``"frames"`` or at ``"all"`` 30-degree rotations, with the
+    vertex; with ``folded``, of the folded places alone, for a touch whose normals disagree across
+    scales), posed by their principal ``"frames"`` or at ``"all"`` 30-degree rotations, with the
     normal as estimated or also ``tilt`` degrees off four ways; or every place at every rotation,
     screened on the model's distance field (``"field"``: :mod:`tactrec.engine.screen`), with the
     data's normals or, for ``tilt > 0``, with normals tilted every ``tilt_step`` degrees out to
@@ -141,6 +146,7 @@ class Tier:
     places: int | None
     rotations: str = "frames"
     tilt: float = 0.0
+    folded: bool = False
 
     def __post_init__(self):
         if self.places is not None and (not isinstance(self.places, int) or self.places < 1):
@@ -149,10 +155,13 @@ class Tier:
             raise ValueError(f"a tier's rotations are 'frames', 'all' or 'field', got {self.rotations!r}")
         if not 0.0 <= self.tilt < 90.0:
             raise ValueError(f"a tier's tilt is in [0, 90) degrees, got {self.tilt!r}")
+        if self.folded and self.rotations != "field":
+            raise ValueError("a tier of folded places is a field tier")
 
 
 #: the default schedule, coarse to fine
-TIERS = (Tier(500, "field"), Tier(24), Tier(None, "field"), Tier(None, "field", 60.0))
+TIERS = (Tier(500, "field"), Tier(500, "field", folded=True), Tier(24), Tier(None, "field"),
+         Tier(None, "field", 60.0))
 #: the exhaustive reference: every vertex, every 30 degrees
 EXHAUSTIVE = (Tier(None, "all"),)
 
@@ -294,6 +303,9 @@ class FastMethod:
                 break
             k = state.next[group[0]]
             group = [i for i in group if state.next[i] == k]
+            if config.tiers[k].folded and touch.scales.agree:     # no folded place to search first
+                state.next.update((i, k + 1) for i in group)
+                continue
             cost = sum(tier_cost(config, k, signs, state.places(i, k), len(touch.curves), len(touch.context))
                        for i in group)
             # the budget bounds the poses tried: work on other touches' points (a context) counts as

@@ -54,23 +54,25 @@ def _places(held, index: int, model, touch, g, sign: int, config: FastConfig, ev
     return held.cache[key]
 
 
-def _screen_places(held, index: int, model, touch, g, sign: int, config: FastConfig) -> np.ndarray:
+def _screen_places(held, index: int, model, touch, g, sign: int, config: FastConfig, folded: bool) -> np.ndarray:
     """The places the field screen takes, in order of curvature gap
-    (:func:`tactrec.engine.screen.screen_places`), computed once per touch."""
-    key = (touch.key, index, _offset_of(model), sign, "screen")
+    (:func:`tactrec.engine.screen.screen_places`; with ``folded``, the folded places alone), computed
+    once per touch."""
+    key = (touch.key, index, _offset_of(model), sign, "screen", folded)
     if key not in held.cache:
         chosen, _ = _places(held, index, model, touch, g, sign, config, True)
         from ..engine.screen import screen_places
 
         held.cache[key] = screen_places(model, chosen, touch.radius, step=config.screen_step,
-                                            angle=config.tilt_step)
+                                            angle=config.tilt_step, folded=folded)
     return held.cache[key]
 
 
 def tier_span(tiers, k: int) -> tuple[int, int | None]:
     """Which of the ranked places tier ``k`` adds: those past the deepest earlier tier of the same kind."""
     tier = tiers[k]
-    start = max((t.places or 0 for t in tiers[:k] if (t.rotations, t.tilt) == (tier.rotations, tier.tilt)),
+    start = max((t.places or 0 for t in tiers[:k]
+                 if (t.rotations, t.tilt, t.folded) == (tier.rotations, tier.tilt, tier.folded)),
                 default=0)
     return start, tier.places
 
@@ -145,7 +147,10 @@ def _cheap(held, indices, touch, config: FastConfig, k: int) -> list[dict]:
             chosen, fit = _places(held, index, seen, s, g, sign, config, tier.places is None)
             if tier.rotations == "field":
                 start, stop = tier_span(config.tiers, k)
-                spots = _screen_places(held, index, seen, s, g, sign, config)[start:stop]
+                # a folded tier runs for a touch whose normals disagree across scales alone
+                folded = tier.folded and not s.scales.agree
+                spots = _screen_places(held, index, seen, s, g, sign, config, folded)[start:stop] \
+                    if folded or not tier.folded else np.zeros(0, dtype=np.int64)
                 if len(spots) == 0:
                     continue
                 context_middles = s.screen_subset(config.coarse_points)[len(s.subset(config.coarse_points)):] \

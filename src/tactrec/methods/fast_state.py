@@ -33,11 +33,13 @@ def tier_places(config, k: int, model, radius: float) -> int:
     size = max(config.screen_step * radius, 1e-12)
     cells = int(np.ceil(1.5 * model.area / size ** 2))
     start, stop = tier_span(config.tiers, k)
-    if stop is not None and cells >= stop:
-        return min(vertices, cells)
     from ..registration.mesh_fast import first_per_cell, first_per_place
 
     order = np.arange(vertices)
+    if config.tiers[k].folded:
+        return min(vertices, len(first_per_place(model, order, size, config.tilt_step, folded=True)))
+    if stop is not None and cells >= stop:
+        return min(vertices, cells)
     extra = len(first_per_place(model, order, size, config.tilt_step)) - len(first_per_cell(model, order, size))
     return min(vertices, cells + extra)
 
@@ -66,6 +68,8 @@ class State:
 
     def places(self, i: int, k: int) -> int:
         """How many places tier ``k`` takes on model ``i`` (:func:`tier_places`), for this touch."""
+        if self.config.tiers[k].folded and self.touch.scales.agree:
+            return 0                    # a folded tier runs for a touch whose normals disagree alone
         if (i, k) not in self.counts:
             model = self.models[i].model
             self.counts[i, k] = tier_places(self.config, k, model, in_model_units(self.touch, model).radius)

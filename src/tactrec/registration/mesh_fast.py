@@ -90,7 +90,8 @@ def first_per_cell(model: MeshModel, order: np.ndarray, size: float) -> np.ndarr
     return order[np.sort(first)]
 
 
-def first_per_place(model: MeshModel, order: np.ndarray, size: float, angle: float) -> np.ndarray:
+def first_per_place(model: MeshModel, order: np.ndarray, size: float, angle: float, *,
+                    folded: bool = False) -> np.ndarray:
     """Of the vertices ``order (n,)``, in that order, the first of each *place*: a cell of a grid
     ``size`` across and a direction of the fitted normal.  A cell's first vertex is a place; so is,
     in each direction bin (a Fibonacci sphere's cell, about ``angle`` degrees across), the first of
@@ -98,19 +99,25 @@ def first_per_place(model: MeshModel, order: np.ndarray, size: float, angle: flo
     a cell's normals lie within a few degrees and it is one place; on a sharp, thin or folded place
     (a crest, an edge, a leg a few millimetres thick) they span tens of degrees, and no one vertex
     poses the data for the rest (on the other-source P3 touches that ended on no fit, the cell's
-    first vertex was 86-165 degrees off the true contact's normal)."""
+    first vertex was 86-165 degrees off the true contact's normal).  With ``folded``, only the
+    places of such *folded* cells (more than one direction)."""
     cells = _cells(model, order, size)
     _, first, inverse = np.unique(cells, return_index=True, return_inverse=True)
     normal = model.fine_curvatures.normal[order]
     head = normal[first][inverse]                                   # each vertex's cell's first
     off = np.nonzero(np.sum(normal * head, axis=1) < np.cos(np.deg2rad(angle)))[0]   # element-wise
     if len(off) == 0:
-        return order[np.sort(first)]
+        return order[:0] if folded else order[np.sort(first)]
     bins = fibonacci_sphere(max(12, int(round(4.0 * np.pi / np.deg2rad(angle) ** 2))))
     direction = np.argmax(np.einsum("nk,bk->nb", normal[off], bins), axis=1)      # no BLAS
     key = inverse[off].astype(np.int64) * len(bins) + direction
     _, extra = np.unique(key, return_index=True)
-    return order[np.sort(np.concatenate([first, off[extra]]))]
+    chosen = np.sort(np.concatenate([first, off[extra]]))          # positions in ``order``
+    if folded:
+        fold = np.zeros(len(first), dtype=bool)
+        fold[inverse[off]] = True
+        chosen = chosen[fold[inverse[chosen]]]
+    return order[chosen]
 
 
 def fibonacci_sphere(count: int) -> np.ndarray:
