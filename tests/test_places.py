@@ -55,9 +55,9 @@ def test_every_vertex_lies_near_a_place_in_position_and_normal(shapes, radius):
             assert len(places) == cells
 
 
-def _folded_sites(model, rng, count=5):
-    """Up to ``count`` vertices of ``model`` (seeded) with a vertex within 2 mm whose fitted normal
-    lies more than 60 degrees off their own: an edge, a rim or the side of a thin part."""
+def _folded_sites(model, rng):
+    """The vertices of ``model`` in a seeded order that have a vertex within 2 mm whose fitted
+    normal lies more than 60 degrees off their own: an edge, a rim or the side of a thin part."""
     normals = model.fine_curvatures.normal
     tree = cKDTree(model.vertices)
     for v in rng.permutation(len(model.vertices)):

@@ -68,12 +68,13 @@ stops when nothing is left.
 
 Before each round, while the best error is beyond a plausible fit of data
 whose noise lies below the fit floor (``floor`` x the touch's radius), the
-fit test steers the search (:func:`~tactrec.methods.fast_state.grid_leaders`): the leader's pose,
-and when the tiers end the leading poses (within ``ratio`` of the best, at
-most ``polish`` models), each pose once, first take the final polish's
-steps (a tier's refinement often ends a step or two short of the fit), and
-those still beyond are searched again about themselves, each with its best alternative, on a grid
-of ``hop_steps`` turns and shifts in each of the six directions, ``hop_angle``
+fit test steers the search (:func:`~tactrec.methods.fast_state.grid_leaders`):
+the leader's pose, and when the tiers end the leading poses (within
+``ratio`` of the best, at most ``polish`` models), each pose once, first
+take the final polish's steps (a tier's refinement often ends a step or two
+short of the fit), and those still beyond are searched again about
+themselves, each with its best alternative, on a grid of ``hop_steps``
+turns and shifts in each of the six directions, ``hop_angle``
 degrees and ``hop_shift`` x the touch's radius out, every pose refined on
 exact distances.  On a scan's facets, at a sharp or thin place, the exact
 steps from a start a few degrees off settle on a nearby pose that fits a few

@@ -54,7 +54,8 @@ def _places(held, index: int, model, touch, g, sign: int, config: FastConfig, ev
     return held.cache[key]
 
 
-def _screen_places(held, index: int, model, touch, g, sign: int, config: FastConfig, folded: bool) -> np.ndarray:
+def _screen_places(held, index: int, model, touch, g, sign: int, config: FastConfig,
+                   folded: bool) -> np.ndarray:
     """The places the field screen takes, in order of curvature gap
     (:func:`tactrec.engine.screen.screen_places`; with ``folded``, the folded places alone), computed
     once per touch."""
@@ -64,7 +65,7 @@ def _screen_places(held, index: int, model, touch, g, sign: int, config: FastCon
         from ..engine.screen import screen_places
 
         held.cache[key] = screen_places(model, chosen, touch.radius, step=config.screen_step,
-                                            angle=config.tilt_step, folded=folded)
+                                        angle=config.tilt_step, folded=folded)
     return held.cache[key]
 
 

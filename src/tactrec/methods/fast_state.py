@@ -19,20 +19,20 @@ def error_of(r: Registration | None) -> float:
     return r.error / r.scale if r is not None and r.ok else np.inf
 
 
-
 def tier_places(config, k: int, model, radius: float) -> int:
     """How many places tier ``k`` takes on a mesh ``model`` for a touch of ``radius`` (model units):
     its vertices, or in a field tier one a grid cell ``screen_step x radius`` across and a direction
     of the normals in it (:func:`tactrec.engine.screen.screen_places`): a surface of area ``A``
     meets about ``1.5 A / size^2`` cells (the mean of ``|n_x| + |n_y| + |n_z|`` over directions),
     and where that reaches past the tier's span the count stops there; else the cells' second
-    directions are counted (on the vertices in index order), and no more places than vertices."""
+    directions are counted (on the vertices in index order), and no more places than vertices.  A
+    folded tier's are the folded cells' places alone, counted so."""
     vertices = len(model.vertices)
     if config.tiers[k].rotations != "field":
         return vertices
     size = max(config.screen_step * radius, 1e-12)
     cells = int(np.ceil(1.5 * model.area / size ** 2))
-    start, stop = tier_span(config.tiers, k)
+    _, stop = tier_span(config.tiers, k)
     from ..registration.mesh_fast import first_per_cell, first_per_place
 
     order = np.arange(vertices)
@@ -128,10 +128,10 @@ def grid_leaders(state: State, meshes: list[int], runner, room, work: int, model
     """While the best pose lies beyond a plausible fit (:attr:`State.plausible`), the leading poses
     (within ``ratio`` of the best, the ``models`` best models), each first polished (the final
     polish's steps, :func:`~.fast_stages._polished`), then searched again about themselves
-    (:func:`~.fast_stages._hopped`) as far as ``room(work)`` grids go: a round that finds nothing better ends that pose's grid
-    (its nodes' basins cover its span, and a finer grid covers less); one that lowers the error
-    but not by half halves the grid; three rounds a pose at the most.  A pose a tier finds later
-    takes a grid of its own.  Returns the work."""
+    (:func:`~.fast_stages._hopped`) as far as ``room(work)`` grids go: a round that finds nothing
+    better ends that pose's grid (its nodes' basins cover its span, and a finer grid covers less);
+    one that lowers the error but not by half halves the grid; three rounds a pose at the most.  A
+    pose a tier finds later takes a grid of its own.  Returns the work."""
     config, spent = state.config, 0
     while True:
         _, e1 = state.leader()
