@@ -127,7 +127,6 @@ from ..probability import fit_limit
 from ..registration import closedform_fast, mesh_fast
 from ..registration.result import Registration
 from .base import NOT_SEARCHED, Config, SearchOutcome
-from .common import in_model_units
 from .fast_stages import _cheap, _closed_form, _polished, _refined, field_stages, hop_cost, tier_span
 from .fast_state import State, error_of, grid_leaders, tier_places
 

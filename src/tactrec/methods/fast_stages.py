@@ -149,7 +149,7 @@ def _cheap(held, indices, touch, config: FastConfig, k: int) -> list[dict]:
             if tier.rotations == "field":
                 start, stop = tier_span(config.tiers, k)
                 # a folded tier runs for a touch whose normals disagree across scales alone
-                folded = tier.folded and not s.scales.agree
+                folded = tier.folded and not touch.scales.agree        # the data's, as the search's rounds
                 spots = _screen_places(held, index, seen, s, g, sign, config, folded)[start:stop] \
                     if folded or not tier.folded else np.zeros(0, dtype=np.int64)
                 if len(spots) == 0:

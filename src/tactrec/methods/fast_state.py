@@ -25,23 +25,30 @@ def tier_places(config, k: int, model, radius: float) -> int:
     of the normals in it (:func:`tactrec.engine.screen.screen_places`): a surface of area ``A``
     meets about ``1.5 A / size^2`` cells (the mean of ``|n_x| + |n_y| + |n_z|`` over directions),
     and where that reaches past the tier's span the count stops there; else the cells' second
-    directions are counted (on the vertices in index order), and no more places than vertices.  A
-    folded tier's are the folded cells' places alone, counted so."""
+    directions are counted (on the vertices in index order, at the cell size rounded down to a
+    quarter octave, kept on the model: :attr:`~tactrec.surfaces.mesh.MeshModel.search_memo`), and no
+    more places than vertices.  A folded tier's are the folded cells' places alone, counted so."""
     vertices = len(model.vertices)
     if config.tiers[k].rotations != "field":
         return vertices
     size = max(config.screen_step * radius, 1e-12)
     cells = int(np.ceil(1.5 * model.area / size ** 2))
     _, stop = tier_span(config.tiers, k)
-    from ..registration.mesh_fast import first_per_cell, first_per_place
-
-    order = np.arange(vertices)
-    if config.tiers[k].folded:
-        return min(vertices, len(first_per_place(model, order, size, config.tilt_step, folded=True)))
-    if stop is not None and cells >= stop:
+    folded = config.tiers[k].folded
+    if stop is not None and cells >= stop and not folded:
         return min(vertices, cells)
-    extra = len(first_per_place(model, order, size, config.tilt_step)) - len(first_per_cell(model, order, size))
-    return min(vertices, cells + extra)
+    counted = 2.0 ** (np.floor(4.0 * np.log2(size)) / 4.0)        # smaller cells: at least as many places
+    key = ("places", float(counted), float(config.tilt_step))
+    memo = getattr(model, "search_memo", {})
+    if key not in memo:
+        from ..registration.mesh_fast import first_per_cell, first_per_place
+
+        order = np.arange(vertices)
+        places = first_per_place(model, order, counted, config.tilt_step)
+        folded_places = first_per_place(model, order, counted, config.tilt_step, folded=True)
+        memo[key] = (len(places) - len(first_per_cell(model, order, counted)), len(folded_places))
+    extra, in_folds = memo[key]
+    return min(vertices, in_folds if folded else cells + extra)
 
 
 class State:
@@ -61,10 +68,13 @@ class State:
         #: the data's noise lies below the fit floor: the true pose fits far within the limit
         self.noise_free = bool(noise_fit(touch.noise) <= config.floor * touch.radius)
         # a best error this far above the limit may still be a fit under the noise; beyond it the true
-        # pose was missed somewhere, and no model's first tiers rule it out.  On noise-free data the
-        # limit is the floor, not a draw of the noise: a best error above it is such a miss
-        self.plausible = self.limit if self.noise_free else \
-            self.limit + config.within * fit_standard_error(self.limit, len(touch.joint_points))
+        # pose was missed somewhere, and no model's first tiers rule it out.  Where the noise's own
+        # spread stays below the floor (noise-free data), the limit is the floor, not a draw of the
+        # noise: a best error above it is such a miss
+        points, noise = len(touch.joint_points), noise_fit(touch.noise)
+        below = noise + config.within * fit_standard_error(noise, points) <= self.limit
+        self.plausible = self.limit if below else \
+            self.limit + config.within * fit_standard_error(self.limit, points)
 
     def places(self, i: int, k: int) -> int:
         """How many places tier ``k`` takes on model ``i`` (:func:`tier_places`), for this touch."""

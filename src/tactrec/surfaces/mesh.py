@@ -242,6 +242,12 @@ class MeshModel(SurfaceModel):
         return 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
 
     @cached_property
+    def search_memo(self) -> dict:
+        """What a search computes of this mesh alone and would compute again for every touch (the
+        field screen's place counts at a cell size), kept for the model's life."""
+        return {}
+
+    @cached_property
     def area(self) -> float:
         """The surface's area (model units squared)."""
         return float(self.face_areas.sum())
