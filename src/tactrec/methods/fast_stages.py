@@ -148,10 +148,8 @@ def _cheap(held, indices, touch, config: FastConfig, k: int) -> list[dict]:
             chosen, fit = _places(held, index, seen, s, g, sign, config, tier.places is None)
             if tier.rotations == "field":
                 start, stop = tier_span(config.tiers, k)
-                # a folded tier runs for a touch whose normals disagree across scales alone
-                folded = tier.folded and not touch.scales.agree        # the data's, as the search's rounds
-                spots = _screen_places(held, index, seen, s, g, sign, config, folded)[start:stop] \
-                    if folded or not tier.folded else np.zeros(0, dtype=np.int64)
+                # a folded tier reaches here only for a touch whose normals disagree (FastMethod.search)
+                spots = _screen_places(held, index, seen, s, g, sign, config, tier.folded)[start:stop]
                 if len(spots) == 0:
                     continue
                 context_middles = s.screen_subset(config.coarse_points)[len(s.subset(config.coarse_points)):] \

@@ -65,21 +65,19 @@ class State:
         self.next = {i: 0 for i in meshes}
         self.models, self.counts = models, {}
         self.limit = max(fit_limit(touch, config.floor), touch.fit)      # a caller's joint fit, with a context
+        points, noise = len(touch.joint_points), noise_fit(touch.noise)
         #: the data's noise lies below the fit floor: the true pose fits far within the limit
-        self.noise_free = bool(noise_fit(touch.noise) <= config.floor * touch.radius)
+        self.noise_free = bool(noise <= config.floor * touch.radius)
         # a best error this far above the limit may still be a fit under the noise; beyond it the true
         # pose was missed somewhere, and no model's first tiers rule it out.  Where the noise's own
         # spread stays below the floor (noise-free data), the limit is the floor, not a draw of the
         # noise: a best error above it is such a miss
-        points, noise = len(touch.joint_points), noise_fit(touch.noise)
         below = noise + config.within * fit_standard_error(noise, points) <= self.limit
         self.plausible = self.limit if below else \
             self.limit + config.within * fit_standard_error(self.limit, points)
 
     def places(self, i: int, k: int) -> int:
         """How many places tier ``k`` takes on model ``i`` (:func:`tier_places`), for this touch."""
-        if self.config.tiers[k].folded and self.touch.scales.agree:
-            return 0                    # a folded tier runs for a touch whose normals disagree alone
         if (i, k) not in self.counts:
             model = self.models[i].model
             self.counts[i, k] = tier_places(self.config, k, model, in_model_units(self.touch, model).radius)
