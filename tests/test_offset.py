@@ -132,8 +132,8 @@ def test_the_places_of_one_offset_never_serve_another():
     for tip in (2.0, 3.0, 0.0):
         touch = Touch.from_data(dataclasses.replace(data, tip_radius=tip))
         seen, view, g = touch.searched(model, 1)
-        got = _places(shared, 0, seen, view, g, 1, config, True)[0]
-        alone = _places(_Held(entries), 0, seen, view, g, 1, config, True)[0]
+        got = _places(shared, 0, seen, view, g, 1, config, "screen", None)
+        alone = _places(_Held(entries), 0, seen, view, g, 1, config, "screen", None)
         np.testing.assert_array_equal(got, alone)
         found.append(got)
     assert not np.array_equal(found[0], found[1]) and not np.array_equal(found[0], found[2])

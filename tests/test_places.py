@@ -8,6 +8,7 @@ import trimesh
 from scipy.spatial import cKDTree
 
 from tactrec.engine.screen import screen_places
+from tactrec.linalg import stable_order, stable_prefix
 from tactrec.registration import mesh_fast
 from tactrec.surfaces.mesh import MeshModel
 
@@ -107,3 +108,22 @@ def test_touches_wrapping_thin_parts_and_edges_end_on_a_fit():
     assert touches == 20
     assert right == 20
     assert fits >= 19
+
+
+@pytest.mark.parametrize("count", [1, 24, 500])
+def test_the_start_of_the_places_is_the_places_of_the_full_order(shapes, count):
+    """A tier that takes the first places of the curvature order gets the same places, in the same
+    order, as thinning the whole order would give, also where many gaps tie (here a few distinct
+    values on a block, whose faces' curvatures are all alike), and for the cells of the frames' tiers
+    as for the field screen's places."""
+    rng = np.random.default_rng(5)
+    for model in shapes:
+        for gaps in (rng.random(len(model.vertices)), rng.integers(0, 4, len(model.vertices)).astype(float)):
+            for thin in (lambda o: mesh_fast.first_per_cell(model, o, 3.0),
+                         lambda o: screen_places(model, o, 12.0, step=0.17, angle=20.0)):
+                whole = thin(stable_order(gaps))
+                start = mesh_fast.leading_places(gaps, count, thin)
+                assert len(start) >= min(count, len(whole))
+                assert np.array_equal(start, whole[:len(start)])
+            head = stable_prefix(gaps, count)
+            assert len(head) >= count and np.array_equal(head, stable_order(gaps)[:len(head)])

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["transform", "rotate", "compose", "solve_spd", "gram", "stable_order", "clearly_less", "QUANTUM"]
+__all__ = ["transform", "rotate", "compose", "solve_spd", "gram", "stable_order", "stable_prefix", "clearly_less", "QUANTUM"]
 
 #: relative size of the score bands within which :func:`stable_order` breaks ties by index
 QUANTUM = 1e-9
@@ -71,6 +71,15 @@ def solve_spd(A: np.ndarray, b: np.ndarray) -> np.ndarray:
     return x
 
 
+def _bands(values: np.ndarray, quantum: float) -> np.ndarray:
+    """Each of ``values (n,)`` as its band of width ``1 + quantum`` (inf where not finite)."""
+    v = np.asarray(values, dtype=np.float64)
+    finite = np.isfinite(v)
+    with np.errstate(divide="ignore"):
+        band = np.floor(np.log(np.maximum(np.where(finite, v, 1.0), 1e-300)) / np.log1p(quantum))
+    return np.where(finite, band, np.inf)
+
+
 def stable_order(values: np.ndarray, *, quantum: float = QUANTUM) -> np.ndarray:
     """Indices sorting ``values (n,)`` (non-negative scores) ascending, with values within a
     factor ``1 + quantum`` of each other ordered by index (non-finite values last, by index).
@@ -78,12 +87,18 @@ def stable_order(values: np.ndarray, *, quantum: float = QUANTUM) -> np.ndarray:
     A cut ``stable_order(v)[:k]`` then keeps the same entries whatever the last bits of ``v``:
     rounding can only reorder values that fall in one band, and there the index decides.
     """
-    v = np.asarray(values, dtype=np.float64)
-    finite = np.isfinite(v)
-    with np.errstate(divide="ignore"):
-        band = np.floor(np.log(np.maximum(np.where(finite, v, 1.0), 1e-300)) / np.log1p(quantum))
-    key = np.where(finite, band, np.inf)
-    return np.argsort(key, kind="stable")                # equal bands keep the index order
+    return np.argsort(_bands(values, quantum), kind="stable")                # equal bands keep the index order
+
+
+def stable_prefix(values: np.ndarray, count: int, *, quantum: float = QUANTUM) -> np.ndarray:
+    """The start of :func:`stable_order` ``(values)``: its first ``count`` indices and the rest of the
+    last one's band (all of them where there are fewer), without sorting the others."""
+    key = _bands(values, quantum)
+    if count >= len(key):
+        return np.argsort(key, kind="stable")
+    last = np.partition(key, count - 1)[count - 1]
+    head = np.flatnonzero(key <= last)                  # in index order: a stable sort keeps it in a band
+    return head[np.argsort(key[head], kind="stable")]
 
 
 def clearly_less(a: float, b: float, *, quantum: float = QUANTUM) -> bool:

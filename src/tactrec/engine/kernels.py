@@ -162,7 +162,8 @@ def field_best(index, bricks, origin, inv_h, quantum, truncation, shift, frames,
     ``places (n, 3)``, ``turned (r, m, 3)`` (:func:`screen_rotations`): hypothesis ``(i, j)``
     moves a data point ``x`` to ``frames[i] @ turned[j] + places[i]``.  Returns each place's
     least mean truncated distance ``(n,) float32`` and its rotation ``(n,) int64`` (the first of
-    equal sums)."""
+    equal sums).  A rotation's sum stops once it exceeds the best so far: its terms are
+    non-negative, so it could not win, and the result is that of the full sums."""
     n = frames.shape[0]
     r = turned.shape[0]
     m = turned.shape[1]
@@ -185,6 +186,8 @@ def field_best(index, bricks, origin, inv_h, quantum, truncation, shift, frames,
                 y = F[1, 0] * a + F[1, 1] * b + F[1, 2] * c + py
                 z = F[2, 0] * a + F[2, 1] * b + F[2, 2] * c + pz
                 total += abs(_sample(index, bricks, origin, inv_h, quantum, truncation, shift, x, y, z))
+                if total > best:        # a sum of non-negative terms: this rotation cannot win
+                    break
             if total < best:
                 best = total
                 arg = j

@@ -38,35 +38,45 @@ def _offset_of(model) -> float:
     return model.radius if isinstance(model, OffsetMesh) else 0.0
 
 
-def _places(held, index: int, model, touch, g, sign: int, config: FastConfig, every: bool):
-    """The places of ``model`` (the mesh of entry ``index`` as the search sees it:
-    :meth:`~tactrec.features.Touch.searched`) in order for ``touch`` (the touch posed there) and
-    its estimate ``g`` on side ``sign``, computed once per touch."""
-    key = (touch.key, index, _offset_of(model), sign, every)
+def _gaps(held, index: int, model, touch, g, sign: int):
+    """Each vertex's curvature gap to ``touch`` and the touch's fit
+    (:func:`~tactrec.registration.mesh_fast.curvature_gaps`) on ``model`` (the mesh of entry ``index``
+    as the search sees it: :meth:`~tactrec.features.Touch.searched`), for its estimate ``g`` on side
+    ``sign``, computed once per touch."""
+    key = (touch.key, index, _offset_of(model), sign)
     if key not in held.cache:
         if len(held.cache) > 8 * len(held.entries) + 8:           # another touch: forget the last one's
             held.cache.clear()
-        chosen, _, fit = mesh_fast.places(model, g, touch.points, touch.radius, spread=config.spread)
-        if every:
-            field = model.fine_curvatures
-            chosen = stable_order(np.hypot(field.k1 - fit[0][0], field.k2 - fit[0][1]))
-        held.cache[key] = (chosen, fit)
+        held.cache[key] = mesh_fast.curvature_gaps(model, g, touch.points)
     return held.cache[key]
 
 
-def _screen_places(held, index: int, model, touch, g, sign: int, config: FastConfig,
-                   folded: bool) -> np.ndarray:
-    """The places the field screen takes, in order of curvature gap
-    (:func:`tactrec.engine.screen.screen_places`; with ``folded``, the folded places alone), computed
-    once per touch."""
-    key = (touch.key, index, _offset_of(model), sign, "screen", folded)
-    if key not in held.cache:
-        chosen, _ = _places(held, index, model, touch, g, sign, config, True)
-        from ..engine.screen import screen_places
+def _places(held, index: int, model, touch, g, sign: int, config: FastConfig, kind: str,
+            count: int | None) -> np.ndarray:
+    """The first ``count`` places of ``model`` (None: all) in order of curvature gap (:func:`_gaps`),
+    maybe a few more: of ``kind`` ``"cells"``, the best vertex of each grid cell ``radius / spread``
+    across (:func:`~tactrec.registration.mesh_fast.first_per_cell`); ``"screen"``, the field
+    screen's places (:func:`tactrec.engine.screen.screen_places`); ``"folded"``, the folded ones
+    alone (which the order's start cannot tell: a cell is folded by any of its vertices).  Kept
+    for the touch, and extended when a later tier takes more."""
+    from ..engine.screen import screen_places
 
-        held.cache[key] = screen_places(model, chosen, touch.radius, step=config.screen_step,
-                                        angle=config.tilt_step, folded=folded)
-    return held.cache[key]
+    key = (touch.key, index, _offset_of(model), sign, kind)
+    found, complete = held.cache.get(key, (None, False))
+    if found is None or not (complete or (count is not None and len(found) >= count)):
+        gaps, _ = _gaps(held, index, model, touch, g, sign)
+        if kind == "cells":
+            def thin(order):
+                return mesh_fast.first_per_cell(model, order, touch.radius / config.spread)
+        else:
+            def thin(order):
+                return screen_places(model, order, touch.radius, step=config.screen_step, angle=config.tilt_step,
+                                     folded=kind == "folded")
+        if kind == "folded":
+            count = None
+        found = mesh_fast.leading_places(gaps, count, thin)
+        held.cache[key] = (found, count is None or len(found) < count)
+    return found
 
 
 def tier_span(tiers, k: int) -> tuple[int, int | None]:
@@ -145,11 +155,12 @@ def _cheap(held, indices, touch, config: FastConfig, k: int) -> list[dict]:
         poses, queries, tried = [], 0, 0
         for sign, _ in t.sides:
             seen, s, g = t.searched(model, sign)                 # (a) of tactrec.tip
-            chosen, fit = _places(held, index, seen, s, g, sign, config, tier.places is None)
+            _, fit = _gaps(held, index, seen, s, g, sign)
+            start, stop = tier_span(config.tiers, k)
             if tier.rotations == "field":
-                start, stop = tier_span(config.tiers, k)
                 # a folded tier reaches here only for a touch whose normals disagree (FastMethod.search)
-                spots = _screen_places(held, index, seen, s, g, sign, config, tier.folded)[start:stop]
+                kind = "folded" if tier.folded else "screen"
+                spots = _places(held, index, seen, s, g, sign, config, kind, stop)[start:stop]
                 if len(spots) == 0:
                     continue
                 context_middles = s.screen_subset(config.coarse_points)[len(s.subset(config.coarse_points)):] \
@@ -158,7 +169,7 @@ def _cheap(held, indices, touch, config: FastConfig, k: int) -> list[dict]:
                 tried, queries = tried + n, queries + q
                 poses.append((R, tr, score, np.full(len(R), sign)))
                 continue
-            start, stop = tier_span(config.tiers, k)
+            chosen = _places(held, index, seen, s, g, sign, config, "cells", stop)
             for lo in range(start, len(chosen) if stop is None else min(stop, len(chosen)), 1000):
                 part = chosen[lo:min(lo + 1000, len(chosen) if stop is None else stop)]
                 tried += len(part)

@@ -28,13 +28,13 @@ from __future__ import annotations
 import numpy as np
 
 from ..estimation import LocalGeometry
-from ..linalg import compose, gram, rotate, solve_spd, stable_order, transform
+from ..linalg import compose, gram, rotate, solve_spd, stable_order, stable_prefix, transform
 from ..surfaces.mesh import MeshModel
 from ..surfaces.mesh_curvature import fitted_frame, quadric_curvatures, tangents
 from .result import Registration, cross, local_frame, rotations_from_vectors, rotations_z
 from .solver import jacobian
 
-__all__ = ["places", "first_per_cell", "first_per_place", "fibonacci_sphere", "frame_poses", "registration",
+__all__ = ["places", "curvature_gaps", "leading_places", "first_per_cell", "first_per_place", "fibonacci_sphere", "frame_poses", "registration",
            "data_curvatures", "prepare", "starting_poses"]
 
 
@@ -64,17 +64,40 @@ def data_curvatures(geometry: LocalGeometry, x: np.ndarray, radius: float):
     return (float(k1[0]), float(k2[0])), d1[0], normal[0]
 
 
+def curvature_gaps(model: MeshModel, geometry: LocalGeometry, x: np.ndarray):
+    """Each vertex's curvature gap to the data ``(n,)``: the distance between its principal
+    curvatures (one weighted paraboloid fit, eq. 14, per vertex) and the data's, fitted at the same
+    scale; and the data's fit (:func:`data_curvatures`)."""
+    field = model.fine_curvatures
+    dk, direction, normal = data_curvatures(geometry, x, field.radius)
+    return np.hypot(field.k1 - dk[0], field.k2 - dk[1]), (dk, direction, normal)
+
+
 def places(model: MeshModel, geometry: LocalGeometry, x: np.ndarray, radius: float, *, spread: float):
     """Step 1: the distinct places of ``model`` in order of curvature gap to the data.
 
     Returns the vertices ``(p,)`` (the best of each grid cell ``radius / spread`` across, best
     cell first), their gaps ``(p,)`` and the data's fit (:func:`data_curvatures`).  Near-equal
     gaps are ordered by vertex index (:func:`stable_order`)."""
-    field = model.fine_curvatures
-    dk, direction, normal = data_curvatures(geometry, x, field.radius)
-    gap = np.hypot(field.k1 - dk[0], field.k2 - dk[1])
+    gap, fit = curvature_gaps(model, geometry, x)
     chosen = first_per_cell(model, stable_order(gap), radius / spread)
-    return chosen, gap[chosen], (dk, direction, normal)
+    return chosen, gap[chosen], fit
+
+
+def leading_places(gaps: np.ndarray, count: int | None, thin) -> np.ndarray:
+    """``thin(stable_order(gaps))[:count]`` and maybe a few more (all of it for ``count`` None),
+    where ``thin`` keeps, of vertices in order, the first of each place (:func:`first_per_cell`,
+    :func:`first_per_place` without ``folded``): whether a vertex is kept depends on the vertices
+    before it alone, so the places of the order's start are the start of its places.  Sorts the
+    gaps' start alone, twice as far each time until ``count`` places are found."""
+    n = len(gaps)
+    head = n if count is None else min(n, max(1024, 8 * count))
+    while True:
+        order = stable_prefix(gaps, head)
+        chosen = thin(order)
+        if count is None or len(chosen) >= count or len(order) >= n:
+            return chosen
+        head = min(n, 2 * len(order))
 
 
 def _cells(model: MeshModel, vertices: np.ndarray, size: float) -> np.ndarray:
