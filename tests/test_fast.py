@@ -570,12 +570,13 @@ def test_search_limits_bench_measures_the_index_and_the_basin(tmp_path):
     assert "| p3 |" in (tmp_path / "search-limits.md").read_text()
 
 
-def test_every_model_contends_while_the_best_is_not_a_fit_within_the_noise():
+def test_a_leader_beyond_the_fit_goes_deeper_first_and_the_others_wait():
     """The search's contention rule (``fast_state.State``): on noisy data a best error within
-    ``within`` standard errors of the fit limit is plausible (on noise-free data, within the limit), and a plausible leader that far ahead of the others' standings
-    settles the search (its deeper tiers could move its pose, not the answer); a best error beyond it
-    means the true pose was missed somewhere, so the leader is not clear however far ahead, and every
-    waiting model takes its next tier."""
+    ``within`` standard errors of the fit limit is plausible (on noise-free data, within the limit),
+    and a plausible leader that far ahead of the others' standings settles the search (its deeper
+    tiers could move its pose, not the answer); a best error beyond it means the true pose was
+    missed somewhere, so the leader is not clear however far ahead: its deeper tiers run first, and
+    the models far behind wait, not ruled out, until the leader's tiers are spent."""
     from types import SimpleNamespace
 
     from tactrec.methods import get_method
@@ -597,7 +598,9 @@ def test_every_model_contends_while_the_best_is_not_a_fit_within_the_noise():
         assert state.clear() is clear
         assert state.settled() is clear
         if not clear:
-            assert state.contending() == [0, 1, 2]
+            assert state.contending() == [0]
+            state.next[0] = len(config.tiers)
+            assert state.contending() == [1, 2]
     # a plausible fit that another model's standing comes within ``ratio`` of is not clear: both go on
     error = 0.99 * plausible
     state = State(touch, models, [0, 1, 2], config)
@@ -608,7 +611,7 @@ def test_every_model_contends_while_the_best_is_not_a_fit_within_the_noise():
     assert not state.clear() and not state.settled()
     assert state.contending() == [0, 1]
     # on noise-free data the truth fits far within the limit: a leader just beyond it, however far
-    # ahead, is a pose missed somewhere, and every model goes on
+    # ahead, is a pose missed somewhere, and the search goes on
     touch = SimpleNamespace(noise=0.0, radius=12.0, fit=0.0, joint_points=np.zeros((90, 3)))
     limit = fit_limit(touch, config.floor)
     for error, clear in ((1.01 * limit, False), (0.99 * limit, True)):
@@ -619,7 +622,7 @@ def test_every_model_contends_while_the_best_is_not_a_fit_within_the_noise():
         state.deferred = {1: 10 * error, 2: 20 * error}
         assert state.settled() is clear
         if not clear:
-            assert state.contending() == [0, 1, 2]
+            assert state.contending() == [0]
 
 
 def test_a_field_tiers_cost_counts_at_least_the_places_it_screens(scans, small):

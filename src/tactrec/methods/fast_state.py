@@ -110,11 +110,12 @@ class State:
 
     def contending(self) -> list[int]:
         """The models whose next tier runs in this round (the search has not settled, so the best is
-        not clear): those whose standing lies within ``ratio`` x the best error (every model while
-        nothing fits plausibly); when none does, the deferred ones whose next tier is the shallowest."""
+        not clear): those whose standing lies within ``ratio`` x the best error or the fit limit,
+        whichever is higher (every model while none has an error); when none does, the deferred
+        ones whose next tier is the shallowest."""
         waiting = self.waiting()
         _, e1 = self.leader()
-        if not np.isfinite(e1) or e1 > self.plausible:
+        if not np.isfinite(e1):
             near = waiting
         else:
             near = [i for i in waiting if self.standing(i) <= self.config.ratio * max(e1, self.limit)]
