@@ -130,3 +130,44 @@ def test_the_ece_floor_of_a_calibrated_predictor_shrinks_with_the_touches():
     conf = np.random.default_rng(4).uniform(0.2, 1.0, 20_000)
     assert 0.05 < ece_if_calibrated(conf[:50], draws=50) < 0.2
     assert ece_if_calibrated(conf, draws=5) < 0.02
+
+
+def test_fits_closer_than_the_resolution_are_equal():
+    """No distance is read closer than the resolution: two models fitting within it (here 3.5e-7
+    against 4e-7, a noise-free touch's fits on two equal surfaces) share the replicates, however
+    their last digits fall; a fit with points beyond it still loses to one within it."""
+    rng = np.random.default_rng(2)
+    sizes = [41, 41, 41]
+    a = 3.5e-7 * (1.0 + 0.1 * rng.random(123))
+    assert evidence(["a", "b"], [a, a * 4.0 / 3.5], sizes).probabilities().tolist() == [1.0, 0.0]   # without it
+    assert np.allclose(evidence(["a", "b"], [a, a * 4.0 / 3.5], sizes, resolution=0.012).probabilities(), 0.5)
+    off = a + np.where(np.arange(123) % 10 == 0, 0.05, 0.0)                 # a few points well off
+    assert evidence(["a", "b"], [a, off], sizes, resolution=0.012).probabilities()[0] > 0.99
+
+
+def test_a_noise_free_touch_of_a_face_two_parts_share_is_never_sure():
+    """20 seeded noise-free touches (outward known) on the flat top of a box, whose 12 mm curves stay
+    on the face: a second box of another size has the same face, and both fit each touch to the
+    last digits.  None comes back sure (>= 0.95); each is about even between the two boxes."""
+    import trimesh
+
+    from tactrec.recognition import ModelEntry
+    from tactrec.simulation import simulate_touch
+    from tactrec.surfaces.mesh import MeshModel
+    from tactrec.tables import CurvatureTable
+
+    entries = []
+    for name, extents in (("tall", (60.0, 60.0, 40.0)), ("wide", (80.0, 50.0, 30.0))):
+        v, f = trimesh.remesh.subdivide_to_size(*(lambda b: (b.vertices, b.faces))(trimesh.creation.box(extents)),
+                                                max_edge=2.0)
+        model = MeshModel(np.asarray(v), np.asarray(f), name=name, units="mm")
+        entries.append(ModelEntry(model, CurvatureTable(model.table_samples())))
+    model = entries[0].model
+    top = np.flatnonzero((model.vertices[:, 2] > 19.9) & (np.abs(model.vertices[:, :2]).max(axis=1) < 12.0))
+    rng = np.random.default_rng(11)
+    with Recognizer(entries) as recognizer:
+        for site in rng.choice(top, 20, replace=False):
+            touch = simulate_touch(model, [int(site)], points=41, spacing=0.3, rng=rng)
+            result = recognizer.recognize(touch)
+            assert result.best in ("tall", "wide") and result.confidence < 0.95
+            assert abs(result.probabilities["tall"] - result.probabilities["wide"]) < 0.1

@@ -26,7 +26,7 @@ from .io.meeting import MEETING, meeting, meeting_points
 from .io.touch import TactileData
 from .methods import DEFAULT_METHOD, get_method
 from .outliers import ALPHA, judge_ends
-from .probability import AMBIGUOUS, UNKNOWN_PRIOR, Evidence, evidence, fit_limit, residuals
+from .probability import AMBIGUOUS, UNKNOWN_PRIOR, Evidence, evidence, fit_limit, residuals, resolution
 from .registration.result import Registration
 from .runner import _Held, _Pool, _Serial, default_workers
 from .tables import CurvatureTable
@@ -355,7 +355,8 @@ class Recognizer:
         ok = [r for r in ranking if r.ok]
         limit = max(fit_limit(touch, self.floor), touch.fit)
         found = evidence([r.model for r in ok], [self._residuals(r, touch) for r in ok],
-                         [len(c) for c in touch.joint_curves], touch.noise, limits=(limit,))
+                         [len(c) for c in touch.joint_curves], touch.noise, limits=(limit,),
+                         resolution=resolution(touch, self.floor))
         out = Recognition(best, ranking, touch.estimate, 0.0, self.method.name, found, outcome.settled, outcome.work,
                           outcome.depth, touch, outcome.allowed, self.unknown_prior)
         out.probabilities                        # the probabilities are part of the recognition and of its seconds

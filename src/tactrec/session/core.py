@@ -81,7 +81,7 @@ import numpy as np
 from ..errors import InputError
 from ..io.session import SessionTouch, rigid_pose
 from ..io.touch import TactileData
-from ..probability import evidence, fit_limit, residuals
+from ..probability import evidence, fit_limit, residuals, resolution
 from ..recognition import FLOOR
 from .fit import joint_model
 from .joint import JointFit
@@ -226,7 +226,8 @@ class Session(JointFit):
             misses = miss_excess(by_name, ranked, self.misses, step=step, limit=self.limit(keep))
         return evidence([h.model for h in ranked], signed, curves, float(np.median([f.noise for f in self.features])),
                         limits=[fit_limit(self.features[i], self.floor) for i in keep],
-                        touches=[len(self.features[i].curves) for i in keep], misses=misses)
+                        touches=[len(self.features[i].curves) for i in keep], misses=misses,
+                        resolution=min(resolution(self.features[i], self.floor) for i in keep))
 
     def _timed(self, stage: str, fn, *args, **kwargs):
         """``fn(*args, **kwargs)``, its seconds added to this add's ``stage`` (:data:`STAGES`)."""
