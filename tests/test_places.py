@@ -122,8 +122,40 @@ def test_the_start_of_the_places_is_the_places_of_the_full_order(shapes, count):
             for thin in (lambda o: mesh_fast.first_per_cell(model, o, 3.0),
                          lambda o: screen_places(model, o, 12.0, step=0.17, angle=20.0)):
                 whole = thin(stable_order(gaps))
-                start = mesh_fast.leading_places(gaps, count, thin)
-                assert len(start) >= min(count, len(whole))
-                assert np.array_equal(start, whole[:len(start)])
+                for wanted in (count, len(whole)):            # all of them: the start doubles until it has them
+                    start = mesh_fast.leading_places(gaps, wanted, thin)
+                    assert len(start) >= min(wanted, len(whole))
+                    assert np.array_equal(start, whole[:len(start)])
             head = stable_prefix(gaps, count)
             assert len(head) >= count and np.array_equal(head, stable_order(gaps)[:len(head)])
+
+
+def test_a_touchs_places_are_kept_and_extended_as_a_fresh_search_gives_them():
+    """A search's places for one touch, taken a tier at a time (the first 24, then all), are those a
+    fresh search takes at once, for the field screen's places, the frames' cells and every vertex;
+    the folded places come whole whatever a tier asks for."""
+    from tactrec.features import Touch
+    from tactrec.methods.fast import FastConfig
+    from tactrec.methods.fast_stages import _places
+    from tactrec.runner import _Held
+    from tactrec.simulation import simulate_random_touch
+
+    from test_fast import _small_meshes
+
+    entries = _small_meshes()[:1]
+    model, config = entries[0].model, FastConfig()
+    data = simulate_random_touch(model, rng=np.random.default_rng(3), points=41, spacing=0.3, angle=60.0)
+    touch = Touch.from_data(data)
+    seen, view, g = touch.searched(model, 1)
+    shared = _Held(entries)
+    for kind in ("screen", "cells", "every", "folded"):
+        first = _places(shared, 0, seen, view, g, 1, config, kind, 24)
+        whole = _places(shared, 0, seen, view, g, 1, config, kind, None)
+        fresh = _places(_Held(entries), 0, seen, view, g, 1, config, kind, None)
+        np.testing.assert_array_equal(whole, fresh)
+        np.testing.assert_array_equal(first, whole[:len(first)])
+        if kind == "folded":
+            np.testing.assert_array_equal(first, whole)
+        else:
+            assert len(first) >= min(24, len(whole))
+    assert len(_places(shared, 0, seen, view, g, 1, config, "every", None)) == len(model.vertices)

@@ -171,3 +171,17 @@ def test_a_noise_free_touch_of_a_face_two_parts_share_is_never_sure():
             result = recognizer.recognize(touch)
             assert result.best in ("tall", "wide") and result.confidence < 0.95
             assert abs(result.probabilities["tall"] - result.probabilities["wide"]) < 0.1
+
+
+def test_evidence_keeps_its_resolution_through_json():
+    """Evidence written to JSON and read back gives the same probabilities, its resolution kept;
+    evidence saved before there was one reads as none."""
+    from tactrec.probability import Evidence
+
+    a = np.full(123, 3.5e-7)
+    found = evidence(["a", "b"], [a, a * 2.0], [41, 41, 41], limits=(0.012,), resolution=0.012)
+    back = Evidence.from_json(found.to_json())
+    assert back.resolution == 0.012 and back.probabilities().tolist() == found.probabilities().tolist()
+    old = found.to_json()
+    del old["resolution"]
+    assert Evidence.from_json(old).resolution == 0.0

@@ -13,7 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["transform", "rotate", "compose", "solve_spd", "gram", "stable_order", "stable_prefix", "clearly_less", "QUANTUM"]
+__all__ = ["transform", "rotate", "compose", "solve_spd", "gram", "stable_order", "stable_prefix", "clearly_less",
+           "QUANTUM"]
 
 #: relative size of the score bands within which :func:`stable_order` breaks ties by index
 QUANTUM = 1e-9
@@ -91,8 +92,11 @@ def stable_order(values: np.ndarray, *, quantum: float = QUANTUM) -> np.ndarray:
 
 
 def stable_prefix(values: np.ndarray, count: int, *, quantum: float = QUANTUM) -> np.ndarray:
-    """The start of :func:`stable_order` ``(values)``: its first ``count`` indices and the rest of the
-    last one's band (all of them where there are fewer), without sorting the others."""
+    """The start of :func:`stable_order` ``(values)``: its first ``count`` indices (``count >= 1``)
+    and the rest of the last one's band (all of them where there are fewer), without sorting the
+    others."""
+    if count < 1:
+        raise ValueError(f"a prefix of at least one index, not {count!r}")
     key = _bands(values, quantum)
     if count >= len(key):
         return np.argsort(key, kind="stable")

@@ -162,8 +162,7 @@ def field_best(index, bricks, origin, inv_h, quantum, truncation, shift, frames,
     ``places (n, 3)``, ``turned (r, m, 3)`` (:func:`screen_rotations`): hypothesis ``(i, j)``
     moves a data point ``x`` to ``frames[i] @ turned[j] + places[i]``.  Returns each place's
     least mean truncated distance ``(n,) float32`` and its rotation ``(n,) int64`` (the first of
-    equal sums).  A rotation's sum stops once it exceeds the best so far: its terms are
-    non-negative, so it could not win, and the result is that of the full sums."""
+    equal sums; a sum stops once past the best: its terms are non-negative)."""
     n = frames.shape[0]
     r = turned.shape[0]
     m = turned.shape[1]
@@ -186,7 +185,7 @@ def field_best(index, bricks, origin, inv_h, quantum, truncation, shift, frames,
                 y = F[1, 0] * a + F[1, 1] * b + F[1, 2] * c + py
                 z = F[2, 0] * a + F[2, 1] * b + F[2, 2] * c + pz
                 total += abs(_sample(index, bricks, origin, inv_h, quantum, truncation, shift, x, y, z))
-                if total > best:        # a sum of non-negative terms: this rotation cannot win
+                if total > best:
                     break
             if total < best:
                 best = total

@@ -54,21 +54,24 @@ def _gaps(held, index: int, model, touch, g, sign: int):
 def _places(held, index: int, model, touch, g, sign: int, config: FastConfig, kind: str,
             count: int | None) -> np.ndarray:
     """The first ``count`` places of ``model`` (None: all) in order of curvature gap (:func:`_gaps`),
-    maybe a few more: of ``kind`` ``"cells"``, the best vertex of each grid cell ``radius / spread``
-    across (:func:`~tactrec.registration.mesh_fast.first_per_cell`); ``"screen"``, the field
-    screen's places (:func:`tactrec.engine.screen.screen_places`); ``"folded"``, the folded ones
-    alone (which the order's start cannot tell: a cell is folded by any of its vertices).  Kept
-    for the touch, and extended when a later tier takes more."""
-    from ..engine.screen import screen_places
-
+    maybe a few more: of ``kind`` ``"every"``, every vertex; ``"cells"``, the best vertex of each
+    grid cell ``radius / spread`` across (:func:`~tactrec.registration.mesh_fast.first_per_cell`);
+    ``"screen"``, the field screen's places (:func:`tactrec.engine.screen.screen_places`);
+    ``"folded"``, the folded ones alone (which the order's start cannot tell: a cell is folded by
+    any of its vertices).  Kept for the touch, and extended when a later tier takes more."""
     key = (touch.key, index, _offset_of(model), sign, kind)
     found, complete = held.cache.get(key, (None, False))
     if found is None or not (complete or (count is not None and len(found) >= count)):
         gaps, _ = _gaps(held, index, model, touch, g, sign)
-        if kind == "cells":
+        if kind == "every":
+            def thin(order):
+                return order
+        elif kind == "cells":
             def thin(order):
                 return mesh_fast.first_per_cell(model, order, touch.radius / config.spread)
         else:
+            from ..engine.screen import screen_places
+
             def thin(order):
                 return screen_places(model, order, touch.radius, step=config.screen_step, angle=config.tilt_step,
                                      folded=kind == "folded")
@@ -169,7 +172,8 @@ def _cheap(held, indices, touch, config: FastConfig, k: int) -> list[dict]:
                 tried, queries = tried + n, queries + q
                 poses.append((R, tr, score, np.full(len(R), sign)))
                 continue
-            chosen = _places(held, index, seen, s, g, sign, config, "cells", stop)
+            # a tier of every place (the exhaustive reference) takes every vertex, not one a cell
+            chosen = _places(held, index, seen, s, g, sign, config, "every" if stop is None else "cells", stop)
             for lo in range(start, len(chosen) if stop is None else min(stop, len(chosen)), 1000):
                 part = chosen[lo:min(lo + 1000, len(chosen) if stop is None else stop)]
                 tried += len(part)

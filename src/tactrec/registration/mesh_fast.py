@@ -34,8 +34,8 @@ from ..surfaces.mesh_curvature import fitted_frame, quadric_curvatures, tangents
 from .result import Registration, cross, local_frame, rotations_from_vectors, rotations_z
 from .solver import jacobian
 
-__all__ = ["places", "curvature_gaps", "leading_places", "first_per_cell", "first_per_place", "fibonacci_sphere", "frame_poses", "registration",
-           "data_curvatures", "prepare", "starting_poses"]
+__all__ = ["places", "curvature_gaps", "leading_places", "first_per_cell", "first_per_place", "fibonacci_sphere",
+           "frame_poses", "registration", "data_curvatures", "prepare", "starting_poses"]
 
 
 def prepare(model: MeshModel) -> None:
