@@ -441,6 +441,29 @@ def test_multi_touch_summary_reports_the_add_cost_per_session_size():
     assert all(parts[k]["adds"] == 0 and parts[k]["over_own_median"] is None for k in STAGES)
 
 
+def test_a_session_has_decided_when_it_is_right_and_sure_and_stays_right():
+    """The bench's measure of when a session has decided: its answer right at confidence >= 0.95 and
+    right at every later touch.  A session sure of the right answer that a later touch turns wrong
+    had not decided then; 0.99, which one perfect touch in the open world does not reach, is kept
+    beside it; ``next`` against random places is compared by both."""
+    from tactrec.bench.multi_touch_report import summary, text
+
+    def step(correct, confidence):
+        return {"best": "a" if correct else "b", "correct": correct, "confidence": confidence, "seconds": 1.0,
+                "own_seconds": 1.0, "slipped": []}
+
+    proposed = [step(False, 0.6), step(True, 0.96), step(True, 0.97), step(True, 0.995), step(True, 1.0)]
+    random = [step(True, 0.96), step(False, 0.97), step(True, 0.96), step(True, 0.96), step(True, 0.96)]
+    s = summary([{"next": proposed, "random": random}], STRATEGIES, 5)
+    assert s["next"]["mean_touches_to_right"] == 2 and s["random"]["mean_touches_to_right"] == 3
+    assert s["next"]["mean_touches_to_0.99"] == 4 and s["random"]["mean_touches_to_0.99"] == 5
+    pair = s["next_against_random"]
+    assert (pair["extra_next"], pair["extra_random"], pair["next_earlier"]) == (1, 2, 1)
+    assert (pair["at_0.99"]["extra_next"], pair["at_0.99"]["extra_random"]) == (3, 4)
+    table = text({"seed": 0, "touches": 5, "strategies": STRATEGIES, "summary": {"s": s}})
+    assert "| s | right at 0.95 | 1.00 | 2.00 |" in table and "| s | 0.99 | 3.00 | 4.00 |" in table
+
+
 def test_multi_touch_keeps_each_strategys_sessions_apart():
     """Each strategy's sessions are saved apart and merged into one row per session; a run of one
     strategy reports that strategy alone, its first touches the cost reference."""

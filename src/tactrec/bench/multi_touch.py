@@ -44,8 +44,11 @@ session has found the true pose (its pose of the true model fits the touches
 kept as well as the true pose does, or as well as their noise allows where
 that is looser: :func:`~tactrec.bench.multi_touch_report.truth_found`),
 which tells a miss of the
-searches from data another model fits as well; the touches a session takes to
-reach confidence 0.99 (or 5); and the cost of adding a touch against one
+searches from data another model fits as well; the touches a session takes
+until its answer is right at confidence >= 0.95 and stays right through its
+later touches (or 5), and beside it the touches to reach confidence 0.99 (in
+the open world one perfect touch leaves ``unknown`` about 0.012, so 0.99
+asks for a second touch whatever is chosen); and the cost of adding a touch against one
 touch's recognition, two ways: against the first touches' (same run;
 medians), and against the added touch's own recognition, which every add runs
 first (the ratio per add; median, p95, max).  The first touches are the

@@ -75,8 +75,8 @@ def summary(rows: list[dict], strategies, touches: int) -> dict:
             per_k.append({"touches": k, "accuracy_percent": 100.0 * float(np.mean(ok)),
                           "mean_confidence": float(np.mean(conf)), "ece": expected_calibration_error(conf, ok),
                           "truth_found_percent": 100.0 * float(np.mean(found)) if found else None})
-        decide = [next((i + 1 for i, s in enumerate(r[strategy]) if s["confidence"] >= 0.99), touches)
-                  for r in rows]
+        decide = [_to_sure(r[strategy], touches) for r in rows]
+        right = [_to_right(r[strategy], touches) for r in rows]
         # sure and wrong: a session whose answer at some touch count is wrong at confidence >= 0.95
         sure_wrong = sum(any(not s["correct"] and s["confidence"] >= SURE for s in r[strategy]) for r in rows)
         adds = [s["seconds"] for r in rows for s in r[strategy][1:] if not s.get("missed")]    # a missed line searches nothing
@@ -88,7 +88,8 @@ def summary(rows: list[dict], strategies, touches: int) -> dict:
             ratios = [x for x in ratios if x is not None]
             by_n.append({"touches_before": n, "adds": len(ratios), **spread(ratios)})
             own += ratios
-        out[strategy] = {"per_touches": per_k, "mean_touches_to_0.99": float(np.mean(decide)),
+        out[strategy] = {"per_touches": per_k, "mean_touches_to_right": float(np.mean(right)),
+                         "mean_touches_to_0.99": float(np.mean(decide)),
                          "sure_wrong_sessions": int(sure_wrong),
                          "add_seconds": spread(adds),
                          "add_ratio_of_medians": float(np.median(adds) / np.median(first)) if adds else None,
@@ -108,16 +109,33 @@ def _to_sure(steps: list, touches: int) -> int:
     return next((i + 1 for i, s in enumerate(steps) if s["confidence"] >= 0.99), touches)
 
 
+def _to_right(steps: list, touches: int) -> int:
+    """The touches a session took until its answer was right at confidence >= :data:`SURE` and stayed
+    right through every later touch (``touches`` if it never did): a session sure of the right
+    answer early that a later touch turns wrong has not decided then."""
+    return next((i + 1 for i, s in enumerate(steps)
+                 if s["correct"] and s["confidence"] >= SURE and all(t["correct"] for t in steps[i:])), touches)
+
+
 def paired(rows: list[dict], touches: int) -> dict:
     """``next`` against random places on the same sessions (same first touch): the extra touches
-    each needs to reach confidence 0.99 beyond the first (``touches`` - 1 where it never does), their
-    means, how much fewer ``next`` needs (percent of random's), the sessions each is earlier in, and
-    the Wilcoxon signed-rank test's two-sided p-value of the paired differences (zeros dropped, the
-    normal approximation with its correction for ties: the differences are small integers; None when
-    every difference is 0)."""
+    each needs beyond the first until its answer is right at confidence >= :data:`SURE` and stays
+    right (:func:`_to_right`; ``touches`` - 1 where it never does), their means, how much fewer
+    ``next`` needs (percent of random's), the sessions each is earlier in, and the Wilcoxon
+    signed-rank test's two-sided p-value of the paired differences (zeros dropped, the normal
+    approximation with its correction for ties: the differences are small integers; None when every
+    difference is 0); and the same for reaching confidence 0.99 (``"at_0.99"``)."""
+    out = _paired(rows, touches, _to_right)
+    if out:
+        out["at_0.99"] = _paired(rows, touches, _to_sure)
+    return out
+
+
+def _paired(rows: list[dict], touches: int, reached) -> dict:
+    """:func:`paired`'s figures for one measure of when a session has decided, ``reached(steps, touches)``."""
     from scipy.stats import wilcoxon
 
-    extra = np.array([[_to_sure(r[s], touches) - 1 for s in ("next", "random")] for r in rows], dtype=np.float64)
+    extra = np.array([[reached(r[s], touches) - 1 for s in ("next", "random")] for r in rows], dtype=np.float64)
     if not len(extra):
         return {}
     d = extra[:, 0] - extra[:, 1]
@@ -171,9 +189,9 @@ def text(table: dict) -> str:
     lines = [f"Sessions of up to {touches} touches (seed {seed}), method fast; accuracy (mean confidence) after "
              "each touch count.", "",
              "| set | strategy | " + " | ".join(f"{k} touch{'es' if k > 1 else ''}" for k in range(1, touches + 1))
-             + " | touches to 0.99 | sure (>= 0.95) and wrong | add s median / p95 / max | add / first, medians "
-             "| add / the touch alone, median / p95 / max |",
-             "|---|---|" + "---|" * (touches + 5)]
+             + " | touches to right at 0.95, staying right | touches to 0.99 | sure (>= 0.95) and wrong "
+             "| add s median / p95 / max | add / first, medians | add / the touch alone, median / p95 / max |",
+             "|---|---|" + "---|" * (touches + 6)]
     for name, s in table["summary"].items():
         for strategy in table["strategies"]:
             st = s[strategy]
@@ -184,22 +202,27 @@ def text(table: dict) -> str:
             o = st["add_over_own"]
             own = "-" if o["median"] is None else f"{o['median']:.2f} / {o['p95']:.2f} / {o['max']:.2f}"
             lines.append(f"| {name} ({s['sessions']}) | {strategy} | " + " | ".join(cells)
-                         + f" | {st['mean_touches_to_0.99']:.2f} | {st.get('sure_wrong_sessions', '-')} | {adds} | "
+                         + f" | {st.get('mean_touches_to_right', float('nan')):.2f} | {st['mean_touches_to_0.99']:.2f} | "
+                         f"{st.get('sure_wrong_sessions', '-')} | {adds} | "
                          f"{ratio} | {own} |")
     pairs = {name: s["next_against_random"] for name, s in table["summary"].items() if s.get("next_against_random")}
     if pairs:
         lines += ["", "`next` against random places on the same sessions: the touches beyond the first each needs "
-                  "to reach confidence 0.99 (mean), how many fewer `next` needs, the sessions each is earlier in, "
-                  "and the Wilcoxon signed-rank test's p-value; `next`'s proposals, s.", "",
-                  "| set | extra touches, next | extra, random | fewer with next | next earlier | random earlier | "
-                  "p-value | proposal s median / p95 / max |", "|---|---|---|---|---|---|---|---|"]
-        for name, pr in pairs.items():
+                  "until its answer is right at confidence >= 0.95 and stays right, or to reach confidence 0.99 "
+                  "(mean), how many fewer `next` needs, the sessions each is earlier in, and the Wilcoxon "
+                  "signed-rank test's p-value; `next`'s proposals, s.", "",
+                  "| set | until | extra touches, next | extra, random | fewer with next | next earlier | "
+                  "random earlier | p-value | proposal s median / p95 / max |", "|---|---|---|---|---|---|---|---|---|"]
+        for name, both in pairs.items():
             q = table["summary"][name]["next"]["propose_seconds"]
             prop = "-" if q["median"] is None else f"{q['median']:.2f} / {q['p95']:.2f} / {q['max']:.2f}"
-            fewer = "-" if pr["fewer_percent"] is None else f"{pr['fewer_percent']:.0f}%"
-            pv = "-" if pr["p_value"] is None else f"{pr['p_value']:.3g}"
-            lines.append(f"| {name} | {pr['extra_next']:.2f} | {pr['extra_random']:.2f} | {fewer} | "
-                         f"{pr['next_earlier']} | {pr['random_earlier']} | {pv} | {prop} |")
+            for until, pr in (("right at 0.95", both), ("0.99", both.get("at_0.99") or {})):
+                if not pr:
+                    continue
+                fewer = "-" if pr["fewer_percent"] is None else f"{pr['fewer_percent']:.0f}%"
+                pv = "-" if pr["p_value"] is None else f"{pr['p_value']:.3g}"
+                lines.append(f"| {name} | {until} | {pr['extra_next']:.2f} | {pr['extra_random']:.2f} | {fewer} | "
+                             f"{pr['next_earlier']} | {pr['random_earlier']} | {pv} | {prop} |")
     lines += ["", "Adding a touch to a session of n touches, against the added touch's own recognition: median "
               "(adds).", "", "| set | strategy | " + " | ".join(f"n = {n}" for n in range(1, touches)) + " |",
               "|---|---|" + "---|" * (touches - 1)]
