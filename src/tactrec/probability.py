@@ -118,7 +118,7 @@ def fit_limit(touch, floor: float) -> float:
     """The largest mean distance (data units) still a fit of ``touch`` (a :class:`~tactrec.features.Touch`):
     a perfect fit's under its noise (:func:`noise_fit`), or ``floor`` x its radius on noise-free
     data, whichever is larger."""
-    return max(noise_fit(touch.noise), floor * touch.radius)
+    return max(noise_fit(touch.noise), resolution(touch, floor))
 
 
 def fit_standard_error(fit: float, points: int) -> float:

@@ -50,8 +50,9 @@ whether or not the best fits; the deferred models, shallowest tier first,
 when none contends.  A model far behind is not ruled out, it waits: while
 nothing fits, the leading models' deeper tiers run first, and the others'
 when the leaders' are spent, unless the budget ends the search first (a
-round it cannot afford stops it, whichever models wait; on the P3 touches of the other-source scans
-that went past the first tier, the true model led in 32 of 37 after it;
+round it cannot afford stops it, whichever models wait; on the P3 touches
+of the other-source scans that went past the first tier, the true model
+led in 32 of 37 after it;
 deepening every model there, as before, gave no fit 4 where this gives 3,
 and on the YCB and CAD sets 2 where this gives 1).  The search
 stops (:meth:`State.settled`) when the best error is a *fit*: within what

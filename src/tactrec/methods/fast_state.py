@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..linalg import clearly_less
-from ..probability import fit_limit, fit_standard_error, noise_fit
+from ..probability import fit_limit, fit_standard_error, noise_fit, resolution
 from ..registration.result import Registration
 from .common import in_model_units
 from .fast_stages import _hopped, _polished, tier_span
@@ -67,7 +67,7 @@ class State:
         self.limit = max(fit_limit(touch, config.floor), touch.fit)      # a caller's joint fit, with a context
         points, noise = len(touch.joint_points), noise_fit(touch.noise)
         #: the data's noise lies below the fit floor: the true pose fits far within the limit
-        self.noise_free = bool(noise <= config.floor * touch.radius)
+        self.noise_free = bool(noise <= resolution(touch, config.floor))
         # a best error this far above the limit may still be a fit under the noise; beyond it the true
         # pose was missed somewhere, and no model's first tiers rule it out.  Where the noise's own
         # spread stays below the floor (noise-free data), the limit is the floor, not a draw of the
