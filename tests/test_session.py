@@ -127,9 +127,10 @@ def test_next_proposes_an_approach_line_from_outside_every_hypothesis(small):
 def test_next_sends_the_line_through_a_touched_point_when_no_pose_fits(small):
     """Eight seeded one-touch sessions of the egg against a database of the brick and the ring alone,
     whose poses cannot fit it: the line runs through the touch's point farthest from its contact
-    (the data say the object is there), starting outside every leading hypothesis' surface, so it
-    meets the egg itself, at that point or before; the first curve runs away from the contact and
-    the curves lie across the line."""
+    (the data say the object is there) along the touch's own normal, starting outside the most
+    probable hypothesis' surface (the poses that do not fit say nothing of where the object is not),
+    so it meets the egg itself, at that point or before; the first curve runs away from the contact
+    and the curves lie across the line."""
     from tactrec.session import Hypothesis
     from tactrec.session.lines import first_hit
 
@@ -156,9 +157,10 @@ def test_next_sends_the_line_through_a_touched_point_when_no_pose_fits(small):
             assert gap[np.argmin(np.linalg.norm(x - proposal.contact, axis=1))] >= np.max(gap) - 1.0
             off = proposal.contact - line.start
             assert np.linalg.norm(off - (off @ line.direction) * line.direction) < 1e-9   # on the line
-            for h in leading:
-                y = h.scale * line.start @ h.rotation.T + h.translation
-                assert models[h.model].planes(y[None])[0][0] > 0
+            assert abs(line.direction @ session.features[0].geometry.normal) > 1.0 - 1e-9
+            h = leading[0]
+            y = h.scale * line.start @ h.rotation.T + h.translation
+            assert models[h.model].planes(y[None])[0][0] > 0
             truth = Hypothesis("egg", Rw.T, -Rw.T @ tw, 1.0, 0.0, np.zeros(0), ())
             hit = first_hit(egg.model, truth, line, 0.3)
             assert hit is not None and (hit - line.start) @ line.direction <= off @ line.direction + 0.3
@@ -647,3 +649,135 @@ def test_the_search_budget_bounds_step_5_and_none_lifts_it(scans):
     assert any(searches for searches, _ in spent[1.0]), "no add searched again: the budget went unchecked"
     assert any(a > own for searches, own in spent[None] for a, _ in searches), \
         "no add's search could spend beyond its own search's work without a budget: the option went unchecked"
+
+
+def _bumped_boxes():
+    """A box (80 x 60 x 40 mm) and the same box with one bump on its top face (3 mm high, 8 mm in
+    radius, at x = 20, y = 10): two models that every touch away from the bump fits alike."""
+    import trimesh
+
+    from tactrec.database import ModelEntry
+    from tactrec.surfaces.mesh import MeshModel
+    from tactrec.tables import CurvatureTable
+
+    box = trimesh.creation.box(extents=(80.0, 60.0, 40.0))
+    for _ in range(5):
+        box = box.subdivide()
+    v = box.vertices.copy()
+    r = np.hypot(v[:, 0] - 20.0, v[:, 1] - 10.0)
+    top = (v[:, 2] > 19.999) & (r < 8.0)
+    v[top, 2] += 3.0 * np.cos(0.5 * np.pi * r[top] / 8.0) ** 2
+    out = []
+    for name, vertices in (("box", box.vertices), ("bumped", v)):
+        model = MeshModel(vertices, box.faces, name=name, units="mm")
+        out.append(ModelEntry(model, CurvatureTable(model.table_samples())))
+    return out
+
+
+def test_next_takes_its_candidates_where_near_duplicates_differ():
+    """The disagreement map (tactrec.proposal.disagreement) on a box and its copy with one bump, at
+    the same pose, after touches at a corner of the top face: over the whole box the places that
+    disagree most all lie on the bump, the only place where the two surfaces differ, and by far more
+    than the noise; within a reach that leaves the bump out, nothing disagrees.  A box drawn at
+    2,000 random vertices, a bump over a fiftieth of its surface."""
+    from tactrec.proposal.disagreement import places
+    from tactrec.proposal.gain import information
+    from tactrec.session import Hypothesis
+
+    entries = _bumped_boxes()
+    models = {e.name: e.model for e in entries}
+    bump = np.array([20.0, 10.0])
+    g = np.linspace(-6.0, 6.0, 13)
+    touched = np.array([[x, y, 20.0] for x in -34.0 + g for y in -24.0 + g])
+    pose = np.concatenate([np.eye(3), np.zeros((3, 1))], axis=1)
+    H0 = information(models["box"], pose, 1.0, touched)
+    box, bumped = (Hypothesis(name, np.eye(3), np.zeros(3), 1.0, 0.0, np.zeros(1), (True,)) for name in models)
+    for k in range(4):
+        for h, rival in ((box, bumped), (bumped, box)):
+            found = places(models, h, pose, H0, [(rival, pose, H0)], touched[84:85], np.array([0.0, 0.0, 1.0]),
+                           radius=None, sigma=0.05, count=5, rng=k)
+            assert len(found) == 5
+            for place in found:
+                assert np.linalg.norm(place.point[:2] - bump) < 8.0 and place.disagreement > 3.0
+            near = places(models, h, pose, H0, [(rival, pose, H0)], touched[84:85], np.array([0.0, 0.0, 1.0]),
+                          radius=20.0, sigma=0.05, count=5, rng=k)
+            assert len(near) == 5 and max(p.disagreement for p in near) < 1e-6
+
+
+def test_next_aims_where_near_duplicates_differ():
+    """Twenty seeded one-touch sessions on the plain box of a box and its copy with one bump, the
+    touch at a corner of the top face away from the bump (both fit it alike).  A box's corners are
+    all alike within a touch's reach, so the bumped box's pose found puts the bump anywhere, often
+    on a face turned away from the touch, out of reach: at least four of the twenty put it within
+    reach.  Where the bump can be reached,
+    ``next`` aims at it, the only place where the two surfaces differ: the line meets the bumped
+    box's top face close enough to the bump for the touch's curves (12 mm each way) to cross it,
+    within 20 mm of its centre, a fifteenth of the box's surface."""
+    from tactrec.simulation import simulate_world_touch
+
+    entries = _bumped_boxes()
+    bump = np.array([20.0, 10.0, 20.0])
+    aimed = 0
+    with Recognizer(entries) as recognizer:
+        for k in range(20):
+            rng = instance_rng(31, k)
+            Rw, tw = random_rigid_motion(rng, extent=300.0)
+            world2model = (Rw.T, -Rw.T @ tw, 1.0)
+            spot = np.array([rng.uniform(-37.0, -34.0), rng.uniform(-27.0, -24.0), 20.0])     # away from the bump
+            a = rng.uniform(0.0, np.pi)
+            directions = np.array([[np.cos(a), np.sin(a), 0.0], [np.cos(a + 1.0), np.sin(a + 1.0), 0.0]]) @ Rw.T
+            touch, pose = simulate_world_touch(entries[0].model, world2model, spot @ Rw.T + tw, directions,
+                                               points=81, spacing=0.3, noise=0.0, outward=True, rng=rng)
+            session = recognizer.session()
+            result = session.add(touch, pose)
+            assert {h.model for h in result.leading()} == {"box", "bumped"}
+            proposal = session.next(radius=80.0, rng=k)
+            assert proposal.contact is not None
+            h = result.hypothesis("bumped")
+            if (h.rotation.T @ [0.0, 0.0, 1.0]) @ session.features[0].geometry.normal < 0.0:
+                continue                  # the pose found puts the bump on the far side, out of reach
+            aimed += 1
+            line = proposal.approach
+            # where the line meets the bumped box's surface under its pose, in its frame
+            x = h.scale * (line.start + np.linspace(0.0, line.length, 2001)[:, None] * line.direction) @ h.rotation.T \
+                + h.translation
+            inside = np.nonzero(entries[1].model.planes(x)[0] <= 0.0)[0]
+            assert len(inside), k
+            assert np.linalg.norm(x[inside[0], :2] - bump[:2]) <= 8.0 + 12.0 and x[inside[0], 2] > 19.0, k
+    assert aimed >= 4
+
+
+def test_next_locates_the_object_again_when_a_line_met_nothing_where_every_pose_put_it(small):
+    """Four seeded one-touch sessions of the egg: a line reported to have met nothing though it runs
+    through the touch's contact cuts into every pose that fits the touch, so no leading pose fits
+    the evidence; ``next`` then sends its line through a touched point, where the data say the
+    object is, rather than where those poses predict it."""
+    from tactrec.io.session import MissedLine
+
+    egg = small[0]
+    with Recognizer(small) as recognizer:
+        for k in range(4):
+            Rw, tw = random_rigid_motion(instance_rng(16, k), extent=300.0)
+            touch = simulate_random_touch(egg.model, rng=instance_rng(17, k), **dict(NOISY, points=31))
+            session = recognizer.session()
+            session.add(touch, sensor_to_world(touch, (Rw, tw)))
+            c, n = session.contacts()[0], session.features[0].geometry.normal
+            session.add_miss(MissedLine(c + 10.0 * n, -n, 20.0))
+            proposal = session.next(radius=20.0, rng=k)
+            x = session.features[0].points
+            assert np.min(np.linalg.norm(x - proposal.contact, axis=1)) < 1e-9, k
+
+
+def test_a_touch_the_truth_meets_is_worth_more_than_a_line_it_misses():
+    """The expected gain weighs ``unknown`` too (tactrec.proposal): two models at 0.4 each and unknown
+    at 0.2, and two lines that tell the models apart completely, one that the true model's pose
+    meets (a touch it fits, which leaves unknown less likely) and one that it misses (no fit to
+    weigh): the first leaves less uncertainty."""
+    from tactrec.proposal.gain import expected_entropy
+
+    w, u = np.array([0.4, 0.4]), 0.2
+    z = np.array([[0.0, 50.0], [50.0, 0.0]])                      # truth pose (rows) against model fitted
+    truth, takes = w.copy(), np.ones(2, dtype=bool)
+    hit = expected_entropy(w, u, z, np.ones(2, dtype=bool), truth, takes)
+    miss = expected_entropy(w, u, z, np.zeros(2, dtype=bool), truth, takes)
+    assert hit < miss

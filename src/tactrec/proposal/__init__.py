@@ -5,13 +5,18 @@ The hypotheses are the session's models, each at its joint pose
 the most probable, until they hold :data:`MASS` of the models' probability
 (``unknown``'s aside; at most :data:`LEADING`).  With one left that holds
 :data:`MASS` of all the probability there is nothing to separate and nothing
-is proposed (with less, a touch to confirm it is: below).  Where no place suits every leading hypothesis (below), the least
-probable is left out until one does, down to the two most probable; the
-proposal lists the hypotheses it separates.
+is proposed (with less, a touch to confirm it is: below).  Where no place
+suits every leading hypothesis (below), the least probable is left out
+until one does, down to the two most probable; the proposal lists the
+hypotheses it separates.
 
-Candidates.  Places on the leading hypotheses' surfaces within ``radius`` of
-an earlier touch's contact (``candidates`` random sites of each model in that
-reach, carried into the world by its pose).  At each, the sensor is sent
+Candidates.  Places where the leading hypotheses disagree
+(:mod:`tactrec.proposal.disagreement`): each hypothesis' surface is drawn
+over the whole object, carried into the world by its pose, and the places
+within ``radius`` of an earlier contact, on the side the earlier touches
+came from, where the nearest rival's surface lies farthest in standard
+errors of the difference (the touches' noise and how far each pose may
+still move there), are its ``candidates``.  At each, the sensor is sent
 along an *approach line*: from :data:`STANDOFF` x ``radius`` outside the
 place along its outward normal, inwards, twice that far (a line that starts
 inside some hypothesis' surface is no candidate).  Under every pose of every
@@ -45,10 +50,16 @@ offset ``e`` adding the folded normal's mean at ``e`` less the half-normal's
 (``z_iM``, :func:`~tactrec.proposal.gain.separation`).  The noise sigma is the session's: the
 touches' own, or the best joint fit's if that is larger.  After the touch,
 model ``M``'s probability is weighted by ``exp(-z_iM^2 / 2)``, the true
-model's by 1.  The expected gain is the entropy of the models' probabilities
-now less its expectation over the truths after the touch, in bits.
-``unknown`` is left out of the gain: what an object not in the database
-would show along the line cannot be predicted.  But with one hypothesis left
+model's by 1.  ``unknown`` counts too: where the true pose meets the line,
+the touch is one its pose fits, and unknown is weighed against it as the
+open world weighs a model at the fit test's edge
+(:func:`tactrec.probability.open_world`); where it meets nothing there is
+no fit to weigh, and unknown keeps its weight.  So of two lines that tell
+the models apart alike, the one the truths meet gains more.  What an object
+not in the database would show along the line cannot be predicted: that
+share of the entropy is left as it is.  The expected gain is the entropy of
+the probabilities now, unknown's included, less its expectation after the
+touch, in bits.  With one hypothesis left
 that holds less than :data:`MASS` of the probability (``unknown`` holding the
 rest), a touch that its pose predicts is proposed to confirm it (each touch a pose fits makes unknown
 less likely, :mod:`tactrec.probability`): the line of a place on its surface
@@ -57,20 +68,24 @@ its gain the entropy between the model and unknown (what the touch can
 settle).
 
 Locating. The predictions above are only as good as the poses: where no
-leading hypothesis' pose fits the touches kept as well as their noise allows
-(:meth:`tactrec.session.Session.fitted_at`: the session's searches have not
+leading hypothesis' pose fits the evidence (the touches kept as well as
+their noise allows, :meth:`tactrec.session.Session.fitted_at`, and no line
+that met nothing cut beyond the fit test: the session's searches have not
 found the object's pose, or the object is none of the models), a line
 predicted from them tends to miss the object again and again. What is known
 then is where the object is: at the touches' points. The line proposed runs
 through the earlier touches' point farthest from every contact (so the new
-touch widens the touched span), along the most probable pose's outward
-normal there, :data:`STANDOFF` x ``radius`` outside it and twice that far,
-so it meets the object at that point or before; the first curve runs away
-from the nearest contact. The next touch's search, scored with the earlier
-touches, looks for the pose again. Its gain is not predicted: the proposal
-reports the entropy of the outcomes, ``unknown``'s included, the most a
-touch can settle. Points whose line would start inside a leading hypothesis'
-surface are passed over.
+touch widens the touched span), along that touch's own normal (on the side
+of the most probable pose's outward normal), :data:`STANDOFF` x ``radius``
+outside it and twice that far, so it meets the object at that point or
+before; the first curve runs away from the nearest contact. The next
+touch's search, scored with the earlier touches, looks for the pose again.
+Its gain is not predicted: the proposal reports the entropy of the
+outcomes, ``unknown``'s included, the most a touch can settle. Points whose
+line would start inside the most probable hypothesis' surface are passed
+over; the poses that do not fit say nothing of where the object is not.
+Where no line suits the leading hypotheses (below), the touches are
+located the same way.
 
 Choice.  The gain saturates: after one touch, most places that qualify
 separate the leading hypotheses at their poses completely, and their gains
@@ -89,10 +104,12 @@ import dataclasses
 import numpy as np
 
 from ..io.session import MissedLine
+from ..probability import CONSISTENT_SE
 from ..session.lines import depth_excess
 from ..session.result import LEADING, MASS
-from .gain import entropy, information, separation
-from .predict import outcome, reachable, to_model
+from .disagreement import places, touched_side
+from .gain import entropy, expected_entropy, information, separation
+from .predict import outcome, to_model
 
 __all__ = ["Proposal", "propose", "MASS", "LEADING", "STANDOFF", "CANDIDATES"]
 
@@ -171,23 +188,21 @@ def propose(session, *, radius: float, angle: float = 60.0, candidates: int = CA
     hyps = [(h.model, probs.get(h.model, 0.0)) for h in leading]
     if len(leading) < 2 and probs.get(leading[0].model, 0.0) >= MASS:
         return Proposal(None, None, None, 0.0, hyps, "one hypothesis holds the probability: nothing to separate")
-    use = session.kept()
-    if not any(session.fitted_at(h.error, use) for h in leading):
-        # no leading pose fits the touches: none predicts where the object is, the touches do
-        found = _locate(session, leading, radius=radius, angle=angle)
-        if found is not None:
-            contact, normal, directions, line = found
-            rest = max(1.0 - sum(w for _, w in hyps), 0.0)
-            gain = entropy(np.array([w for _, w in hyps] + [rest]))
-            return Proposal(contact, normal, directions, gain, hyps, approach=line)
+    if not any(_fits(session, h) for h in leading):
+        # no leading pose fits the touches and the lines that met nothing: none predicts where the
+        # object is, the touches do
+        located = _located(session, leading, hyps, radius=radius, angle=angle)
+        if located is not None:
+            return located
     if len(leading) < 2:
         sure = probs.get(leading[0].model, 0.0)
         # one model against unknown: a touch its pose predicts, as far from the others as reach allows
         confirm = _best_line(session, leading, np.ones(1), radius=radius, angle=angle, candidates=candidates,
                              rng=rng)
         if confirm is None:
-            return Proposal(None, None, None, 0.0, hyps, f"no approach line within {radius:g} of the touches that "
-                            f"{leading[0].model} takes")
+            return _located(session, leading, hyps, radius=radius, angle=angle) or Proposal(
+                None, None, None, 0.0, hyps, f"no approach line within {radius:g} of the touches that "
+                f"{leading[0].model} takes")
         _, contact, normal, directions, line = confirm
         gain = entropy(np.array([sure, 1.0 - sure]))
         return Proposal(contact, normal, directions, gain, hyps, approach=line)
@@ -198,8 +213,31 @@ def propose(session, *, radius: float, angle: float = 60.0, candidates: int = CA
         if best is not None:
             gain, contact, normal, directions, line = best
             return Proposal(contact, normal, directions, gain, hyps[:n], approach=line)
-    return Proposal(None, None, None, 0.0, hyps, f"no approach line within {radius:g} of the touches whose outcome "
-                    "the two leading hypotheses both predict")
+    return _located(session, leading, hyps, radius=radius, angle=angle) or Proposal(
+        None, None, None, 0.0, hyps, f"no approach line within {radius:g} of the touches whose outcome the two "
+        "leading hypotheses both predict")
+
+
+def _fits(session, h) -> bool:
+    """Whether hypothesis ``h``'s pose fits the touches kept as well as their noise allows and cuts
+    into no line that met nothing (by the fit test, :mod:`tactrec.probability`)."""
+    if not session.fitted_at(h.error, session.kept()):
+        return False
+    ev = session.result.evidence
+    if ev is None or ev.misses is None or not np.size(ev.misses) or h.model not in ev.models:
+        return True
+    return float(np.max(np.asarray(ev.misses)[list(ev.models).index(h.model)])) <= CONSISTENT_SE
+
+
+def _located(session, leading: list, hyps: list, *, radius: float, angle: float) -> Proposal | None:
+    """The proposal of :func:`_locate`'s line (module text, Locating), or None where there is none."""
+    found = _locate(session, leading, radius=radius, angle=angle)
+    if found is None:
+        return None
+    contact, normal, directions, line = found
+    rest = max(1.0 - sum(w for _, w in hyps), 0.0)
+    return Proposal(contact, normal, directions, entropy(np.array([w for _, w in hyps] + [rest])), hyps,
+                    approach=line)
 
 
 def _locate(session, leading: list, *, radius: float, angle: float):
@@ -209,21 +247,25 @@ def _locate(session, leading: list, *, radius: float, angle: float):
     models = {e.name: e.model for e in session.recognizer.models}
     h = leading[0]
     model = models[h.model]
-    x = np.concatenate([session.features[i].points for i in session.kept()])
+    kept = session.kept()
+    x = np.concatenate([session.features[i].points for i in kept])
+    data = np.concatenate([np.repeat(session.features[i].geometry.normal[None], len(session.features[i].points), 0)
+                           for i in kept])                        # each point's touch's own normal, world frame
     contacts = session.contacts()
     gap = np.linalg.norm(x[:, None, :] - contacts[None, :, :], axis=2)
     order = np.argsort(-gap.min(axis=1), kind="stable")
     _, n = model.planes(to_model(h, x[order]))
-    outward = n @ h.rotation                                                 # model -> world directions
-    outward = outward / np.linalg.norm(outward, axis=1, keepdims=True)
+    pose_side = n @ h.rotation                                                 # model -> world directions
+    outward = data[order] / np.linalg.norm(data[order], axis=1, keepdims=True)
+    outward *= np.where(np.einsum("ij,ij->i", outward, pose_side) < 0.0, -1.0, 1.0)[:, None]
     standoff = STANDOFF * radius
     starts = x[order] + standoff * outward
-    inside = np.zeros(len(order), dtype=bool)
-    for g in leading:
-        inside |= models[g.model].planes(to_model(g, starts))[0] <= 0.0
+    # no leading pose fits the touches, so none says where the object is not: the line need only start
+    # outside the most probable one, which gave its side
+    inside = model.planes(to_model(h, starts))[0] <= 0.0
     if inside.all():
         return None
-    k = int(np.argmax(~inside))                      # the farthest point whose line starts outside them all
+    k = int(np.argmax(~inside))                      # the farthest point whose line starts outside it
     p, normal = x[order[k]], outward[k]
     away = p - contacts[np.argmin(gap[order[k]])]              # from the nearest contact, in the tangent plane
     away = away - (away @ normal) * normal
@@ -244,18 +286,20 @@ def _best_line(session, leading: list, weights: np.ndarray, *, radius: float, an
     """The approach line of largest expected gain among ``leading`` hypotheses (probabilities
     ``weights``): ``(gain, contact, normal, directions, line)``, or None where no line qualifies."""
     models = {e.name: e.model for e in session.recognizer.models}
-    weights = weights / weights.sum()
+    unknown = float(session.result.unknown)
+    weights = (1.0 - unknown) * weights / weights.sum()
     use = session.kept()
     x_world = np.concatenate([session.features[i].points for i in use])
     # each leading model at each of its poses; the poses share the model's probability as truths and
     # are the starts of its refits
-    poses, p, owner, info = [], [], [], []
+    poses, p, owner, info, arrays = [], [], [], [], []
     for k, (h, w) in enumerate(zip(leading, weights)):
         family = session.family(h.model)
         for pose in family:
             poses.append(dataclasses.replace(h, rotation=pose[:, :3], translation=pose[:, 3]))
             p.append(w / len(family))
             owner.append(k)
+            arrays.append(pose)
             info.append(information(models[h.model], pose, h.scale, x_world))
     p, owner = np.array(p), np.array(owner)
     by_model = np.eye(len(leading))[owner]                                       # (poses, models)
@@ -267,13 +311,16 @@ def _best_line(session, leading: list, weights: np.ndarray, *, radius: float, an
     sigma = max(noise, leading[0].error * np.sqrt(np.pi / 2), 1e-3 * spacing)
     limit = session.limit(use)
     standoff = STANDOFF * radius
-    before = entropy(weights)
+    before = entropy(np.append(weights, unknown))
     found = []
-    for h in leading:
+    for k, h in enumerate(leading):
         model = models[h.model]
-        for frame, c in reachable(model, h, contacts, radius, candidates, rng):
-            normal = frame.normal @ h.rotation                                        # model -> world direction
-            normal = normal / np.linalg.norm(normal)
+        first = int(np.argmax(owner == k))                                  # the model's joint pose
+        rivals = [(poses[j], arrays[j], info[j]) for j in np.nonzero(owner != k)[0]]
+        side = touched_side(model, poses[first], contacts)
+        for place in places(models, poses[first], arrays[first], info[first], rivals, contacts, side, radius=radius,
+                            sigma=sigma, count=candidates, rng=rng):
+            frame, c, normal = place.frame, place.point, place.normal
             line = MissedLine(c + standoff * normal, -normal, 2.0 * standoff)
             if any(models[g.model].planes(to_model(g, line.start)[None])[0][0] <= 0.0 for g in poses):
                 continue                                                  # starts inside some pose's surface
@@ -296,23 +343,20 @@ def _best_line(session, leading: list, weights: np.ndarray, *, radius: float, an
             missing = (kinds == "miss")
             if missing.any():                # a truth that meets nothing: each model by its pose the line cuts least
                 cut = depth_excess([o[3] for o in outcomes], limit)
-                for k in range(len(leading)):
-                    z[missing & (owner != k), k] = cut[owner == k].min()
+                for j in range(len(leading)):
+                    z[missing & (owner != j), j] = cut[owner == j].min()
             if hits.any():
                 stacked = np.array([o[1][0] for o, hit in zip(outcomes, hits) if hit])
                 kept = np.array([o[1][1] for o, hit in zip(outcomes, hits) if hit])
-                for k in range(len(leading)):
-                    others = (owner != k)[hits]
+                for j in range(len(leading)):
+                    others = (owner != j)[hits]
                     if not others.any():
                         continue
-                    sep = np.min([separation(models[poses[j].model], poses[j], info[j], stacked[others], sigma,
-                                              len(x_world), kept[others]) for j in np.nonzero(owner == k)[0]],
+                    sep = np.min([separation(models[poses[i].model], poses[i], info[i], stacked[others], sigma,
+                                              len(x_world), kept[others]) for i in np.nonzero(owner == j)[0]],
                                  axis=0)
-                    z[np.nonzero(hits)[0][others], k] = sep
-            with np.errstate(under="ignore"):
-                after = weights[None, :] * np.exp(-0.5 * np.minimum(z * z, 1400.0))
-                after = after / after.sum(axis=1, keepdims=True)
-            gain = before - float(sum(truth[i] * entropy(after[i]) for i in np.nonzero(takes)[0]))
+                    z[np.nonzero(hits)[0][others], j] = sep
+            gain = before - expected_entropy(weights, unknown, z, hits, truth, takes)
             contact = outcomes[0][2]      # where the most probable hypothesis' joint pose (its family's first) meets it
             found.append((gain, c if contact is None else contact, normal, directions, line))
     return _chosen(found, contacts, before)

@@ -6,9 +6,10 @@ from __future__ import annotations
 import numpy as np
 from scipy.special import erf
 
+from ..probability import open_world
 from ..registration.solver import jacobian
 
-__all__ = ["entropy", "information", "refit", "excess", "separation"]
+__all__ = ["entropy", "pose_jacobian", "information", "refit", "excess", "separation", "expected_entropy"]
 
 
 def entropy(p: np.ndarray) -> float:
@@ -16,7 +17,7 @@ def entropy(p: np.ndarray) -> float:
     return float(-np.sum(p * np.log2(p)))
 
 
-def _jacobian(model, moved: np.ndarray):
+def pose_jacobian(model, moved: np.ndarray):
     """Signed distances ``(m,)`` of model-frame points ``moved (m, 3)`` and their pose Jacobian
     ``(m, 6)``: the change of each distance under a small turn ``w`` (per model size) and shift
     ``u`` of the model frame, ``(m x n) . w + n . u``."""
@@ -28,7 +29,7 @@ def _jacobian(model, moved: np.ndarray):
 
 def information(model, pose: np.ndarray, scale: float, x_world: np.ndarray) -> np.ndarray:
     """``J0^T J0 (6, 6)`` of world points ``x_world (m, 3)`` under ``pose (3, 4)``, model units."""
-    _, J = _jacobian(model, scale * x_world @ pose[:, :3].T + pose[:, 3])
+    _, J = pose_jacobian(model, scale * x_world @ pose[:, :3].T + pose[:, 3])
     return np.einsum("mi,mj->ij", J, J)
 
 
@@ -39,7 +40,7 @@ def refit(model, pose: np.ndarray, scale: float, H0: np.ndarray, x_world: np.nda
     touch's signed distances after the step ``(n, k)`` (0 where not predicted) and the sum of
     squares the step adds to the earlier touches' ``(n,)``, world units."""
     n, k = x_world.shape[:2]
-    r, J = _jacobian(model, (scale * x_world.reshape(-1, 3) @ pose[:, :3].T + pose[:, 3]))
+    r, J = pose_jacobian(model, (scale * x_world.reshape(-1, 3) @ pose[:, :3].T + pose[:, 3]))
     r, J = r.reshape(n, k) * kept, J.reshape(n, k, 6) * kept[..., None]
     H = H0[None] + np.einsum("nmi,nmj->nij", J, J)
     b = np.einsum("nmi,nm->ni", J, r)
@@ -74,3 +75,29 @@ def separation(model, h, H0: np.ndarray, predicted: np.ndarray, sigma: float, ea
     extra = (excess(offsets, sigma) * kept).sum(axis=1) + earlier * excess(np.sqrt(added / earlier), sigma)
     spread = sigma * np.sqrt(1.0 - 2.0 / np.pi)                      # a half-normal distance's
     return extra / (spread * np.sqrt(2.0 * total))
+
+
+def expected_entropy(weights: np.ndarray, unknown: float, z: np.ndarray, hits: np.ndarray, truth: np.ndarray,
+                     takes: np.ndarray) -> float:
+    """The expected entropy (bits) of the models' and ``unknown``'s probabilities after a touch.
+
+    ``weights (k,)`` are the models' probabilities and ``unknown`` unknown's (together 1); for each
+    of the ``p`` truth poses, ``z (p, k)`` is by how many standard errors each model's refitted
+    pose would fit the touch worse than the truth's (:func:`separation`), ``hits (p,)`` whether it
+    meets the line, ``truth (p,)`` its probability and ``takes (p,)`` whether it predicts an outcome.
+    Under truth pose ``i`` model ``M`` is weighted by ``exp(-z_iM^2 / 2)``, and
+    ``unknown`` by the open world's likelihood of a fit against a model's at the test's edge
+    (:func:`tactrec.probability.open_world`) where the truth meets the line (a touch the true pose
+    fits), by 1 where it meets nothing (no fit to weigh).  If the object is none of them
+    (``unknown``), what the line shows cannot be predicted: that share of the entropy is left as
+    it is."""
+    edge = open_world(np.ones(1), np.zeros(1), prior=0.5)        # at even odds: the likelihoods' ratio
+    fit = edge[1] / edge[0][0]                              # unknown against a model that fits the touch
+    with np.errstate(under="ignore"):
+        after = weights[None, :] * np.exp(-0.5 * np.minimum(z * z, 1400.0))
+    u = np.where(hits, unknown * fit, unknown)
+    total = after.sum(axis=1) + u
+    out = unknown * entropy(np.append(weights, unknown))
+    for i in np.nonzero(takes)[0]:
+        out += truth[i] * entropy(np.append(after[i], u[i]) / total[i])
+    return float(out)

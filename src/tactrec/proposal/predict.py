@@ -7,12 +7,10 @@ import numpy as np
 
 from ..session.lines import crossing
 
-__all__ = ["KEPT", "DRAWS", "to_world", "to_model", "predicted", "reachable", "outcome"]
+__all__ = ["KEPT", "to_world", "to_model", "predicted", "outcome"]
 
 #: a predicted curve is taken up to where the surface turns an edge, and must keep this share of its points
 KEPT = 0.25
-#: a hypothesis' surface is drawn at random up to this many times ``candidates`` for reachable places
-DRAWS = 50
 
 
 def to_world(h, x_model: np.ndarray) -> np.ndarray:
@@ -49,24 +47,6 @@ def predicted(model, h, contact_w: np.ndarray, directions_w: np.ndarray, *, poin
     if not np.all(kept.sum(axis=1) >= KEPT * points):
         return None
     return ((x - t) @ R) / s, kept.reshape(-1)
-
-
-def reachable(model, h, contacts: np.ndarray, radius: float, count: int, rng) -> list:
-    """Up to ``count`` random places on ``model``'s surface that hypothesis ``h`` puts within ``radius``
-    of an earlier contact (world ``contacts (N, 3)``): ``(SiteFrame, world point)`` pairs, drawn
-    uniformly over the surface in batches until there are enough or :data:`DRAWS` x ``count`` were
-    drawn."""
-    out, drawn = [], 0
-    while len(out) < count and drawn < DRAWS * count:
-        for site in model.random_sites(4 * count, rng=rng):
-            frame = model.site_frame(site)
-            c = to_world(h, frame.point)
-            if np.min(np.linalg.norm(contacts - c, axis=1)) <= radius:
-                out.append((frame, c))
-                if len(out) >= count:
-                    break
-        drawn += 4 * count
-    return out
 
 
 def outcome(model, pose, line, directions, *, step: float, points: int, spacing: float):
