@@ -127,10 +127,10 @@ def test_next_proposes_an_approach_line_from_outside_every_hypothesis(small):
 def test_next_sends_the_line_through_a_touched_point_when_no_pose_fits(small):
     """Eight seeded one-touch sessions of the egg against a database of the brick and the ring alone,
     whose poses cannot fit it: the line runs through the touch's point farthest from its contact
-    (the data say the object is there) along the touch's own normal, starting outside the most
-    probable hypothesis' surface (the poses that do not fit say nothing of where the object is not),
-    so it meets the egg itself, at that point or before; the first curve runs away from the contact
-    and the curves lie across the line."""
+    (the data say the object is there) along the touch's own normal, on the side the leading poses
+    vote for and starting outside one of them (the poses that do not fit say nothing of where the
+    object is not), so it meets the egg itself, at that point or before; the first curve runs away
+    from the contact and the curves lie across the line."""
     from tactrec.session import Hypothesis
     from tactrec.session.lines import first_hit
 
@@ -158,9 +158,8 @@ def test_next_sends_the_line_through_a_touched_point_when_no_pose_fits(small):
             off = proposal.contact - line.start
             assert np.linalg.norm(off - (off @ line.direction) * line.direction) < 1e-9   # on the line
             assert abs(line.direction @ session.features[0].geometry.normal) > 1.0 - 1e-9
-            h = leading[0]
-            y = h.scale * line.start @ h.rotation.T + h.translation
-            assert models[h.model].planes(y[None])[0][0] > 0
+            assert any(models[h.model].planes((h.scale * line.start @ h.rotation.T + h.translation)[None])[0][0] > 0
+                       for h in leading)
             truth = Hypothesis("egg", Rw.T, -Rw.T @ tw, 1.0, 0.0, np.zeros(0), ())
             hit = first_hit(egg.model, truth, line, 0.3)
             assert hit is not None and (hit - line.start) @ line.direction <= off @ line.direction + 0.3
@@ -781,3 +780,27 @@ def test_a_touch_the_truth_meets_is_worth_more_than_a_line_it_misses():
     hit = expected_entropy(w, u, z, np.ones(2, dtype=bool), truth, takes)
     miss = expected_entropy(w, u, z, np.zeros(2, dtype=bool), truth, takes)
     assert hit < miss
+
+
+def test_the_near_duplicates_set_differs_only_at_its_bump_and_starts_clear_of_it(small):
+    """``bench multi-touch``'s near-duplicates (tactrec.bench.near_duplicates), on the egg: the copy
+    differs from the original only within half the bump's width of its centre, by its height there
+    and never more; the truth alternates between the two; every point of the first touch lies at
+    least NEAR less the curves' 6 mm from the bump's centre, clear of the bump (5 mm in radius)."""
+    from tactrec.bench import near_duplicates as nd
+
+    cache = {}
+    entries, centre = nd.family(small[0], 0, 0, cache)
+    v0, v1 = entries[0].model.vertices, entries[1].model.vertices
+    moved = np.linalg.norm(v1 - v0, axis=1)
+    r = np.linalg.norm(v0 - v0[centre], axis=1)
+    assert np.all(moved[r >= 0.5 * nd.WIDTH] == 0.0) and moved.max() <= nd.HEIGHT + 1e-9
+    assert moved[centre] == pytest.approx(nd.HEIGHT) and np.count_nonzero(moved) >= nd.BUMP_VERTICES
+    spec = {"length": 12.0, "angle": 30.0, "noise": 0.05, "outward": False}
+    for i in range(4):
+        truth, data = nd.first_touch(entries, centre, 0, i, 0, spec, 0.3)
+        assert truth is entries[i % 2]
+        truth_pose = data.meta["truth"]
+        points = data.points @ np.asarray(truth_pose["rotation"]).T + np.asarray(truth_pose["translation"])
+        gap = np.linalg.norm(points - v0[centre], axis=1)
+        assert gap.min() >= nd.NEAR - 6.0 - 0.5 > 0.5 * nd.WIDTH

@@ -37,6 +37,12 @@ answer.  Sets:
     tuna can meets the bowl), touched as ``hard-10`` is
     (the first touch anywhere on a face); ``ceil(instances / 10)`` sessions
     per scan.
+``near-duplicates``
+    Each of the ten ``paper-fig11`` scans against itself and a copy with one
+    bump (:mod:`tactrec.bench.near_duplicates`), the original touched in even
+    instances and the copy in odd ones, the first touch ``hard-10``'s within
+    reach of the bump but clear of it: only a touch of the bump tells them
+    apart; ``instances`` sessions per scan.
 
 Reported per set and strategy (:mod:`tactrec.bench.multi_touch_report`),
 after 1 to 5 touches: accuracy, mean confidence, ECE, and how often the
@@ -85,7 +91,7 @@ from .common import (CORE_SOURCES, instance_rng, random_face_site, recognizer, r
 
 __all__ = ["run", "SETS", "TOUCHES", "STRATEGIES", "SIMILAR", "similar_scans", "shape_signature"]
 
-SETS = ("hard-10", "p3-78", "similar")
+SETS = ("hard-10", "p3-78", "similar", "near-duplicates")
 #: scans in a ``similar`` session's database: the touched one and those most alike in shape
 SIMILAR = 4
 STRATEGIES = ("random", "next")
@@ -94,6 +100,7 @@ TOUCHES = 5
 RADIUS = 40.0
 SPECS = {"hard-10": {"length": 12.0, "angle": 30.0, "noise": 0.05, "outward": False},
          "similar": {"length": 12.0, "angle": 30.0, "noise": 0.05, "outward": False},
+         "near-duplicates": {"length": 12.0, "angle": 30.0, "noise": 0.05, "outward": False},
          "p3-78": {"length": 24.0, "angle": 60.0, "noise": 0.0, "outward": True}}
 SPACING = 0.3
 #: a random next touch: places within reach tried (a touch the estimator refuses is no place) and
@@ -132,6 +139,7 @@ def similar_scans(entries, m_index: int, count: int = SIMILAR) -> list[int]:
 
 
 _SIGNATURES: dict = {}
+_FAMILIES: dict = {}
 
 
 def _signature(entry) -> np.ndarray:
@@ -148,6 +156,14 @@ def _first(kind: str, m_index: int, instance: int, seed: int):
         db = _database(tuple(BUILTIN_SETS["paper-fig11"]))
         entry = db.entries[m_index]
         return db.entries, entry, _simulate(entry, m_index, instance, seed, "hard")[1]
+    if kind == "near-duplicates":
+        from . import near_duplicates
+        from .fast_vs_paper import _database
+
+        db = _database(tuple(BUILTIN_SETS["paper-fig11"]))
+        entries, centre = near_duplicates.family(db.entries[m_index], m_index, seed, _FAMILIES)
+        entry, first = near_duplicates.first_touch(entries, centre, m_index, instance, seed, SPECS[kind], SPACING)
+        return entries, entry, first
     from . import scale
 
     db = scale._database()
@@ -228,7 +244,7 @@ def _session(task) -> dict:
     """One strategy's session: ``task = (set, scan index, instance, seed, strategy)``."""
     kind, m_index, instance, seed, strategy = task
     entries, entry, first = _first(kind, m_index, instance, seed)
-    if kind == "similar":              # a database of its own: its worker processes end with the session
+    if kind in ("similar", "near-duplicates"):   # a database of its own: its worker processes end with the session
         from ..recognition import Recognizer, default_workers
 
         with Recognizer(entries, workers=default_workers()) as own:
@@ -298,8 +314,9 @@ def run(*, out, instances: int = 10, seed: int = 0, jobs: int | None = None, qui
     for folder in folders.values():
         folder.mkdir(parents=True, exist_ok=True)
     tasks = []
-    if "hard-10" in sets:
-        tasks += [("hard-10", m, i, seed) for m in range(len(BUILTIN_SETS["paper-fig11"])) for i in range(instances)]
+    for kind in ("hard-10", "near-duplicates"):
+        if kind in sets:
+            tasks += [(kind, m, i, seed) for m in range(len(BUILTIN_SETS["paper-fig11"])) for i in range(instances)]
     for kind in ("p3-78", "similar"):
         if kind in sets:
             tasks += [(kind, m, i, seed) for m in range(len(ycb_names())) for i in range(math.ceil(instances / 10))]
