@@ -76,14 +76,16 @@ predicted from them tends to miss the object again and again. What is known
 then is where the object is: at the touches' points. The line proposed runs
 through the earlier touches' point farthest from every contact (so the new
 touch widens the touched span), along that touch's own normal (on the side
-of the most probable pose's outward normal), :data:`STANDOFF` x ``radius``
+the leading poses' outward normals there put the outside, each voting by
+its probability), :data:`STANDOFF` x ``radius``
 outside it and twice that far, so it meets the object at that point or
 before; the first curve runs away from the nearest contact. The next
 touch's search, scored with the earlier touches, looks for the pose again.
 Its gain is not predicted: the proposal reports the entropy of the
 outcomes, ``unknown``'s included, the most a touch can settle. Points whose
-line would start inside the most probable hypothesis' surface are passed
-over; the poses that do not fit say nothing of where the object is not.
+line would start inside the most probable hypothesis' surface among those
+that put the outside on that side are passed over; the poses that do not
+fit say nothing of where the object is not.
 Where no line suits the leading hypotheses (below), the touches are
 located the same way.
 
@@ -245,8 +247,6 @@ def _locate(session, leading: list, *, radius: float, angle: float):
     normal, directions, line)``, world frame, or None where every such line starts inside some
     leading hypothesis' surface."""
     models = {e.name: e.model for e in session.recognizer.models}
-    h = leading[0]
-    model = models[h.model]
     kept = session.kept()
     x = np.concatenate([session.features[i].points for i in kept])
     data = np.concatenate([np.repeat(session.features[i].geometry.normal[None], len(session.features[i].points), 0)
@@ -254,15 +254,28 @@ def _locate(session, leading: list, *, radius: float, angle: float):
     contacts = session.contacts()
     gap = np.linalg.norm(x[:, None, :] - contacts[None, :, :], axis=2)
     order = np.argsort(-gap.min(axis=1), kind="stable")
-    _, n = model.planes(to_model(h, x[order]))
-    pose_side = n @ h.rotation                                                 # model -> world directions
     outward = data[order] / np.linalg.norm(data[order], axis=1, keepdims=True)
-    outward *= np.where(np.einsum("ij,ij->i", outward, pose_side) < 0.0, -1.0, 1.0)[:, None]
+    # the side: the leading poses' outward normals vote, each by its probability
+    probs = session.result.probabilities
+    vote, agree = np.zeros(len(order)), []
+    for g in leading:
+        _, n = models[g.model].planes(to_model(g, x[order]))
+        dots = np.einsum("ij,ij->i", np.asarray(n) @ g.rotation, outward)
+        vote += probs.get(g.model, 0.0) * np.sign(np.nan_to_num(dots))
+        agree.append(dots)
+    side = np.where(vote < 0.0, -1.0, 1.0)
+    outward *= side[:, None]
     standoff = STANDOFF * radius
     starts = x[order] + standoff * outward
     # no leading pose fits the touches, so none says where the object is not: the line need only start
-    # outside the most probable one, which gave its side
-    inside = model.planes(to_model(h, starts))[0] <= 0.0
+    # outside the most probable pose that puts the outside on that side
+    inside = np.zeros(len(order), dtype=bool)
+    checked = np.zeros(len(order), dtype=bool)
+    for g, dots in zip(leading, agree):
+        mine = ~checked & (dots * side > 0.0)
+        if mine.any():
+            inside[mine] = models[g.model].planes(to_model(g, starts[mine]))[0] <= 0.0
+            checked |= mine
     if inside.all():
         return None
     k = int(np.argmax(~inside))                      # the farthest point whose line starts outside it
