@@ -678,7 +678,7 @@ def test_next_takes_its_candidates_where_near_duplicates_differ():
     the same pose, after touches at a corner of the top face: over the whole box the places that
     disagree most all lie on the bump, the only place where the two surfaces differ, and by far more
     than the noise; within a reach that leaves the bump out, nothing disagrees.  A box drawn at
-    2,000 random vertices, a bump over a fiftieth of its surface."""
+    2,000 random vertices, a bump over about a hundredth of its surface."""
     from tactrec.proposal.disagreement import places
     from tactrec.proposal.gain import information
     from tactrec.session import Hypothesis
@@ -694,13 +694,13 @@ def test_next_takes_its_candidates_where_near_duplicates_differ():
     for k in range(4):
         for h, rival in ((box, bumped), (bumped, box)):
             found = places(models, h, pose, H0, [(rival, pose, H0)], touched[84:85], np.array([0.0, 0.0, 1.0]),
-                           radius=None, sigma=0.05, count=5, rng=k)
+                           radius=None, sigma=0.05, rng=k)[:5]
             assert len(found) == 5
             for place in found:
                 assert np.linalg.norm(place.point[:2] - bump) < 8.0 and place.disagreement > 3.0
             near = places(models, h, pose, H0, [(rival, pose, H0)], touched[84:85], np.array([0.0, 0.0, 1.0]),
-                          radius=20.0, sigma=0.05, count=5, rng=k)
-            assert len(near) == 5 and max(p.disagreement for p in near) < 1e-6
+                          radius=20.0, sigma=0.05, rng=k)
+            assert len(near) >= 5 and max(p.disagreement for p in near) < 1e-6
 
 
 def test_next_aims_where_near_duplicates_differ():
@@ -752,6 +752,7 @@ def test_next_locates_the_object_again_when_a_line_met_nothing_where_every_pose_
     the evidence; ``next`` then sends its line through a touched point, where the data say the
     object is, rather than where those poses predict it."""
     from tactrec.io.session import MissedLine
+    from tactrec.proposal import _fits
 
     egg = small[0]
     with Recognizer(small) as recognizer:
@@ -762,24 +763,28 @@ def test_next_locates_the_object_again_when_a_line_met_nothing_where_every_pose_
             session.add(touch, sensor_to_world(touch, (Rw, tw)))
             c, n = session.contacts()[0], session.features[0].geometry.normal
             session.add_miss(MissedLine(c + 10.0 * n, -n, 20.0))
+            assert not any(_fits(session, h) for h in session.result.leading())
             proposal = session.next(radius=20.0, rng=k)
             x = session.features[0].points
             assert np.min(np.linalg.norm(x - proposal.contact, axis=1)) < 1e-9, k
 
 
 def test_a_touch_the_truth_meets_is_worth_more_than_a_line_it_misses():
-    """The expected gain weighs ``unknown`` too (tactrec.proposal): two models at 0.4 each and unknown
-    at 0.2, and two lines that tell the models apart completely, one that the true model's pose
-    meets (a touch it fits, which leaves unknown less likely) and one that it misses (no fit to
-    weigh): the first leaves less uncertainty."""
-    from tactrec.proposal.gain import expected_entropy
+    """The expected gain weighs ``unknown`` too (tactrec.proposal): two models and unknown, and lines
+    that tell the models apart completely, one that the true model's pose meets (a touch it fits,
+    which leaves unknown less likely) and one that it misses (no fit to weigh): the first gains more,
+    whether unknown holds 0.2 or 0.9 of the probability.  No line gains less than nothing, and one
+    that the truth misses and that tells the models nothing gains nothing."""
+    from tactrec.proposal.gain import expected_gain
 
-    w, u = np.array([0.4, 0.4]), 0.2
-    z = np.array([[0.0, 50.0], [50.0, 0.0]])                      # truth pose (rows) against model fitted
-    truth, takes = w.copy(), np.ones(2, dtype=bool)
-    hit = expected_entropy(w, u, z, np.ones(2, dtype=bool), truth, takes)
-    miss = expected_entropy(w, u, z, np.zeros(2, dtype=bool), truth, takes)
-    assert hit < miss
+    apart, alike = np.array([[0.0, 50.0], [50.0, 0.0]]), np.zeros((2, 2))    # truth pose (rows), model fitted
+    takes, hit, miss = np.ones(2, dtype=bool), np.ones(2, dtype=bool), np.zeros(2, dtype=bool)
+    for u in (0.2, 0.9):
+        w = np.full(2, (1.0 - u) / 2)
+        gains = {(z_name, h_name): expected_gain(w, u, z, h, w, takes)
+                 for z_name, z in (("apart", apart), ("alike", alike)) for h_name, h in (("hit", hit), ("miss", miss))}
+        assert gains["apart", "hit"] > gains["apart", "miss"] > 0.0
+        assert gains["alike", "hit"] > 0.0 and gains["alike", "miss"] == pytest.approx(0.0, abs=1e-12)
 
 
 def test_the_near_duplicates_set_differs_only_at_its_bump_and_starts_clear_of_it(small):

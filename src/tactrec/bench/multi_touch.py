@@ -114,7 +114,7 @@ def _code_hash(strategy: str) -> str:
     to :mod:`tactrec.proposal` reruns ``next``'s sessions alone."""
     proposal = ("proposal",) if strategy == "next" else ()
     return sources_hash(*CORE_SOURCES, "session", *proposal, "probability.py", "bench/multi_touch.py",
-                        "bench/fast_vs_paper.py", "bench/scale.py")
+                        "bench/fast_vs_paper.py", "bench/scale.py", "bench/near_duplicates.py")
 
 
 def shape_signature(model) -> np.ndarray:

@@ -31,13 +31,15 @@ NEAR, FAR = 15.0, 35.0
 
 def bumped(model, centre: int, *, height: float = HEIGHT, width: float = WIDTH):
     """A copy of mesh ``model`` with a bump at vertex ``centre``: vertices within ``width / 2`` of
-    it raised along their normals by ``height cos^2(pi r / width)``."""
+    it, on its side (normals within 90 degrees of its: not the far face of a thin wall), raised
+    along their normals by ``height cos^2(pi r / width)``."""
     from ..surfaces.mesh import MeshModel
 
     v = np.asarray(model.vertices, dtype=np.float64).copy()
     r = np.linalg.norm(v - v[centre], axis=1)
-    under = r < 0.5 * width
-    v[under] += (height * np.cos(np.pi * r[under] / width) ** 2)[:, None] * np.asarray(model.vertex_normals)[under]
+    normals = np.asarray(model.vertex_normals, dtype=np.float64)
+    under = (r < 0.5 * width) & (normals @ normals[centre] > 0.0)
+    v[under] += (height * np.cos(np.pi * r[under] / width) ** 2)[:, None] * normals[under]
     return MeshModel(v, model.faces, name=f"{model.name}+bump", units=model.units)
 
 

@@ -14,9 +14,10 @@ Candidates.  Places where the leading hypotheses disagree
 (:mod:`tactrec.proposal.disagreement`): each hypothesis' surface is drawn
 over the whole object, carried into the world by its pose, and the places
 within ``radius`` of an earlier contact, on the side the earlier touches
-came from, where the nearest rival's surface lies farthest in standard
-errors of the difference (the touches' noise and how far each pose may
-still move there), are its ``candidates``.  At each, the sensor is sent
+came from, those where the nearest rival's surface lies farthest in
+standard errors of the difference (the touches' noise and how far each
+pose may still move there) are tried in turn, until ``candidates`` lines
+qualify (of at most :data:`TRIED` times as many).  At each, the sensor is sent
 along an *approach line*: from :data:`STANDOFF` x ``radius`` outside the
 place along its outward normal, inwards, twice that far (a line that starts
 inside some hypothesis' surface is no candidate).  Under every pose of every
@@ -57,9 +58,10 @@ open world weighs a model at the fit test's edge
 no fit to weigh, and unknown keeps its weight.  So of two lines that tell
 the models apart alike, the one the truths meet gains more.  What an object
 not in the database would show along the line cannot be predicted: that
-share of the entropy is left as it is.  The expected gain is the entropy of
-the probabilities now, unknown's included, less its expectation after the
-touch, in bits.  With one hypothesis left
+share gains nothing.  The expected gain is how far the probabilities after
+the touch, unknown's included, diverge from those now (Kullback-Leibler,
+bits), expected over the truths: never negative, and 0 for a line that
+changes nothing.  With one hypothesis left
 that holds less than :data:`MASS` of the probability (``unknown`` holding the
 rest), a touch that its pose predicts is proposed to confirm it (each touch a pose fits makes unknown
 less likely, :mod:`tactrec.probability`): the line of a place on its surface
@@ -75,17 +77,19 @@ found the object's pose, or the object is none of the models), a line
 predicted from them tends to miss the object again and again. What is known
 then is where the object is: at the touches' points. The line proposed runs
 through the earlier touches' point farthest from every contact (so the new
-touch widens the touched span), along that touch's own normal (on the side
-the leading poses' outward normals there put the outside, each voting by
-its probability), :data:`STANDOFF` x ``radius``
+touch widens the touched span), along that touch's own normal (on its
+outward side where the touch gives one, else on the side the leading poses'
+outward normals there put the outside, each voting by its probability),
+:data:`STANDOFF` x ``radius``
 outside it and twice that far, so it meets the object at that point or
 before; the first curve runs away from the nearest contact. The next
 touch's search, scored with the earlier touches, looks for the pose again.
 Its gain is not predicted: the proposal reports the entropy of the
 outcomes, ``unknown``'s included, the most a touch can settle. Points whose
 line would start inside the most probable hypothesis' surface among those
-that put the outside on that side are passed over; the poses that do not
-fit say nothing of where the object is not.
+that put the outside on that side are passed over, as are lines already
+followed that met nothing; the poses that do not fit say nothing of where
+the object is not.
 Where no line suits the leading hypotheses (below), the touches are
 located the same way.
 
@@ -110,16 +114,19 @@ from ..probability import CONSISTENT_SE
 from ..session.lines import depth_excess
 from ..session.result import LEADING, MASS
 from .disagreement import places, touched_side
-from .gain import entropy, expected_entropy, information, separation
+from .gain import entropy, expected_gain, information, separation
+from .locate import fan, locate
 from .predict import outcome, to_model
 
 __all__ = ["Proposal", "propose", "MASS", "LEADING", "STANDOFF", "CANDIDATES"]
 
 #: an approach line starts this fraction of ``radius`` outside its place and runs twice as far
 STANDOFF = 0.5
-#: places tried on each leading hypothesis' surface: every line is cast and predicted under every pose of
-#: every leading hypothesis, and past a dozen the gains tie (the farthest of the tied places is proposed)
+#: lines scored on each leading hypothesis' surface, the most disagreeing places whose line qualifies:
+#: every line is cast and predicted under every pose of every leading hypothesis
 CANDIDATES = 12
+#: places tried for them, at most this many times ``candidates``, most disagreeing first
+TRIED = 4
 #: places whose expected gain lies within this fraction of the entropy (the most a touch can gain) of
 #: the best place's are as good: the one farthest from the earlier contacts among them is proposed
 TIE = 0.05
@@ -222,7 +229,8 @@ def propose(session, *, radius: float, angle: float = 60.0, candidates: int = CA
 
 def _fits(session, h) -> bool:
     """Whether hypothesis ``h``'s pose fits the touches kept as well as their noise allows and cuts
-    into no line that met nothing (by the fit test, :mod:`tactrec.probability`)."""
+    into no line that met nothing (by the fit test, :mod:`tactrec.probability`).  The joint pose
+    is the one tested, as it is the one the probabilities weigh, not the family's others."""
     if not session.fitted_at(h.error, session.kept()):
         return False
     ev = session.result.evidence
@@ -232,67 +240,15 @@ def _fits(session, h) -> bool:
 
 
 def _located(session, leading: list, hyps: list, *, radius: float, angle: float) -> Proposal | None:
-    """The proposal of :func:`_locate`'s line (module text, Locating), or None where there is none."""
-    found = _locate(session, leading, radius=radius, angle=angle)
+    """The proposal of :func:`~tactrec.proposal.locate.locate`'s line (module text, Locating), or None
+    where there is none."""
+    found = locate(session, leading, standoff=STANDOFF * radius, angle=angle)
     if found is None:
         return None
     contact, normal, directions, line = found
     rest = max(1.0 - sum(w for _, w in hyps), 0.0)
     return Proposal(contact, normal, directions, entropy(np.array([w for _, w in hyps] + [rest])), hyps,
                     approach=line)
-
-
-def _locate(session, leading: list, *, radius: float, angle: float):
-    """The approach line through an earlier touch's point (module text, Locating): ``(contact,
-    normal, directions, line)``, world frame, or None where every such line starts inside some
-    leading hypothesis' surface."""
-    models = {e.name: e.model for e in session.recognizer.models}
-    kept = session.kept()
-    x = np.concatenate([session.features[i].points for i in kept])
-    data = np.concatenate([np.repeat(session.features[i].geometry.normal[None], len(session.features[i].points), 0)
-                           for i in kept])                        # each point's touch's own normal, world frame
-    contacts = session.contacts()
-    gap = np.linalg.norm(x[:, None, :] - contacts[None, :, :], axis=2)
-    order = np.argsort(-gap.min(axis=1), kind="stable")
-    outward = data[order] / np.linalg.norm(data[order], axis=1, keepdims=True)
-    # the side: the leading poses' outward normals vote, each by its probability
-    probs = session.result.probabilities
-    vote, agree = np.zeros(len(order)), []
-    for g in leading:
-        _, n = models[g.model].planes(to_model(g, x[order]))
-        dots = np.einsum("ij,ij->i", np.asarray(n) @ g.rotation, outward)
-        vote += probs.get(g.model, 0.0) * np.sign(np.nan_to_num(dots))
-        agree.append(dots)
-    side = np.where(vote < 0.0, -1.0, 1.0)
-    outward *= side[:, None]
-    standoff = STANDOFF * radius
-    starts = x[order] + standoff * outward
-    # no leading pose fits the touches, so none says where the object is not: the line need only start
-    # outside the most probable pose that puts the outside on that side
-    inside = np.zeros(len(order), dtype=bool)
-    checked = np.zeros(len(order), dtype=bool)
-    for g, dots in zip(leading, agree):
-        mine = ~checked & (dots * side > 0.0)
-        if mine.any():
-            inside[mine] = models[g.model].planes(to_model(g, starts[mine]))[0] <= 0.0
-            checked |= mine
-    if inside.all():
-        return None
-    k = int(np.argmax(~inside))                      # the farthest point whose line starts outside it
-    p, normal = x[order[k]], outward[k]
-    away = p - contacts[np.argmin(gap[order[k]])]              # from the nearest contact, in the tangent plane
-    away = away - (away @ normal) * normal
-    if np.linalg.norm(away) <= 1e-12 * max(radius, 1.0):
-        away = np.cross(normal, np.eye(3)[np.argmin(np.abs(normal))])
-    t1 = away / np.linalg.norm(away)
-    return p, normal, _fan(t1, np.cross(normal, t1), angle), MissedLine(starts[k], -normal, 2.0 * standoff)
-
-
-def _fan(t1: np.ndarray, t2: np.ndarray, angle: float, start: float = 0.0) -> np.ndarray:
-    """Three curve directions ``(3, 3)`` in the plane of the unit vectors ``t1``, ``t2``: at ``start``
-    (radians from ``t1``) and ``angle`` and twice ``angle`` degrees on."""
-    angles = start + np.deg2rad(angle) * np.arange(3)
-    return np.cos(angles)[:, None] * t1 + np.sin(angles)[:, None] * t2
 
 
 def _best_line(session, leading: list, weights: np.ndarray, *, radius: float, angle: float, candidates: int, rng):
@@ -317,6 +273,7 @@ def _best_line(session, leading: list, weights: np.ndarray, *, radius: float, an
     p, owner = np.array(p), np.array(owner)
     by_model = np.eye(len(leading))[owner]                                       # (poses, models)
     contacts = session.contacts()
+    reached = contacts[use]                                   # the touches kept: where the object was met
     sizes = [len(c) for f in session.features for c in f.curves]
     points = int(np.median(sizes))
     spacing = float(np.median([w.spacing for w in session.world]))
@@ -330,9 +287,13 @@ def _best_line(session, leading: list, weights: np.ndarray, *, radius: float, an
         model = models[h.model]
         first = int(np.argmax(owner == k))                                  # the model's joint pose
         rivals = [(poses[j], arrays[j], info[j]) for j in np.nonzero(owner != k)[0]]
-        side = touched_side(model, poses[first], contacts)
-        for place in places(models, poses[first], arrays[first], info[first], rivals, contacts, side, radius=radius,
-                            sigma=sigma, count=candidates, rng=rng):
+        side = touched_side(model, poses[first], reached)
+        ranked = places(models, poses[first], arrays[first], info[first], rivals, reached, side, radius=radius,
+                        sigma=sigma, rng=rng)
+        taken = 0
+        for place in ranked[:TRIED * candidates]:      # the most disagreeing, until ``candidates`` lines qualify
+            if taken >= candidates:
+                break
             frame, c, normal = place.frame, place.point, place.normal
             line = MissedLine(c + standoff * normal, -normal, 2.0 * standoff)
             if any(models[g.model].planes(to_model(g, line.start)[None])[0][0] <= 0.0 for g in poses):
@@ -340,7 +301,7 @@ def _best_line(session, leading: list, weights: np.ndarray, *, radius: float, an
             start = rng.uniform(0.0, 2 * np.pi)
             t1 = frame.d1 @ h.rotation
             t2 = frame.d2 @ h.rotation
-            directions = _fan(t1, t2, angle, start)
+            directions = fan(t1, t2, angle, start)
             outcomes = [outcome(models[g.model], g, line, directions, step=spacing, points=points, spacing=spacing)
                         for g in poses]
             kinds = np.array([o[0] for o in outcomes], dtype=object)
@@ -369,9 +330,10 @@ def _best_line(session, leading: list, weights: np.ndarray, *, radius: float, an
                                               len(x_world), kept[others]) for i in np.nonzero(owner == j)[0]],
                                  axis=0)
                     z[np.nonzero(hits)[0][others], j] = sep
-            gain = before - expected_entropy(weights, unknown, z, hits, truth, takes)
+            gain = expected_gain(weights, unknown, z, hits, truth, takes)
             contact = outcomes[0][2]      # where the most probable hypothesis' joint pose (its family's first) meets it
             found.append((gain, c if contact is None else contact, normal, directions, line))
+            taken += 1
     return _chosen(found, contacts, before)
 
 

@@ -9,7 +9,7 @@ from scipy.special import erf
 from ..probability import open_world
 from ..registration.solver import jacobian
 
-__all__ = ["entropy", "pose_jacobian", "information", "refit", "excess", "separation", "expected_entropy"]
+__all__ = ["entropy", "pose_jacobian", "information", "refit", "excess", "separation", "expected_gain"]
 
 
 def entropy(p: np.ndarray) -> float:
@@ -77,27 +77,31 @@ def separation(model, h, H0: np.ndarray, predicted: np.ndarray, sigma: float, ea
     return extra / (spread * np.sqrt(2.0 * total))
 
 
-def expected_entropy(weights: np.ndarray, unknown: float, z: np.ndarray, hits: np.ndarray, truth: np.ndarray,
-                     takes: np.ndarray) -> float:
-    """The expected entropy (bits) of the models' and ``unknown``'s probabilities after a touch.
+def expected_gain(weights: np.ndarray, unknown: float, z: np.ndarray, hits: np.ndarray, truth: np.ndarray,
+                  takes: np.ndarray) -> float:
+    """The expected information gain (bits) of a touch about the models and ``unknown``.
 
     ``weights (k,)`` are the models' probabilities and ``unknown`` unknown's (together 1); for each
     of the ``p`` truth poses, ``z (p, k)`` is by how many standard errors each model's refitted
     pose would fit the touch worse than the truth's (:func:`separation`), ``hits (p,)`` whether it
     meets the line, ``truth (p,)`` its probability and ``takes (p,)`` whether it predicts an outcome.
-    Under truth pose ``i`` model ``M`` is weighted by ``exp(-z_iM^2 / 2)``, and
-    ``unknown`` by the open world's likelihood of a fit against a model's at the test's edge
+    Under truth pose ``i`` model ``M`` is weighted by ``exp(-z_iM^2 / 2)``, and ``unknown`` by the
+    open world's likelihood of a fit against a model's at the test's edge
     (:func:`tactrec.probability.open_world`) where the truth meets the line (a touch the true pose
-    fits), by 1 where it meets nothing (no fit to weigh).  If the object is none of them
-    (``unknown``), what the line shows cannot be predicted: that share of the entropy is left as
-    it is."""
+    fits), by 1 where it meets nothing (no fit to weigh).  The gain is the divergence of the
+    probabilities after the touch from those now (Kullback-Leibler, bits), expected over the
+    truths: never negative, 0 for a line that changes nothing.  If the object is none of them
+    (``unknown``), what the line shows cannot be predicted: that share gains nothing."""
     edge = open_world(np.ones(1), np.zeros(1), prior=0.5)        # at even odds: the likelihoods' ratio
     fit = edge[1] / edge[0][0]                              # unknown against a model that fits the touch
+    before = np.append(weights, unknown)
     with np.errstate(under="ignore"):
         after = weights[None, :] * np.exp(-0.5 * np.minimum(z * z, 1400.0))
     u = np.where(hits, unknown * fit, unknown)
-    total = after.sum(axis=1) + u
-    out = unknown * entropy(np.append(weights, unknown))
+    out = 0.0
     for i in np.nonzero(takes)[0]:
-        out += truth[i] * entropy(np.append(after[i], u[i]) / total[i])
-    return float(out)
+        q = np.append(after[i], u[i])
+        q = q / q.sum()
+        kept = (q > 1e-300) & (before > 0.0)
+        out += truth[i] * float(np.sum(q[kept] * np.log2(q[kept] / before[kept])))
+    return out
