@@ -197,19 +197,24 @@ def propose(session, *, radius: float, angle: float = 60.0, candidates: int = CA
     hyps = [(h.model, probs.get(h.model, 0.0)) for h in leading]
     if len(leading) < 2 and probs.get(leading[0].model, 0.0) >= MASS:
         return Proposal(None, None, None, 0.0, hyps, "one hypothesis holds the probability: nothing to separate")
-    if not any(_fits(session, h) for h in leading):
-        # no leading pose fits the touches and the lines that met nothing: none predicts where the
-        # object is, the touches do
-        located = _located(session, leading, hyps, radius=radius, angle=angle)
-        if located is not None:
-            return located
+    # no leading pose fits the touches and the lines that met nothing: none predicts where the object
+    # is, the touches do; where it has no line, the fall-backs below need not ask again
+    unfit = not any(_fits(session, h) for h in leading)
+    located = _located(session, leading, hyps, radius=radius, angle=angle) if unfit else None
+    if located is not None:
+        return located
+
+    def fallback():
+        """Where no line suits the leading hypotheses: the touches located, unless that was tried."""
+        return None if unfit else _located(session, leading, hyps, radius=radius, angle=angle)
+
     if len(leading) < 2:
         sure = probs.get(leading[0].model, 0.0)
         # one model against unknown: a touch its pose predicts, as far from the others as reach allows
         confirm = _best_line(session, leading, np.ones(1), radius=radius, angle=angle, candidates=candidates,
                              rng=rng)
         if confirm is None:
-            return _located(session, leading, hyps, radius=radius, angle=angle) or Proposal(
+            return fallback() or Proposal(
                 None, None, None, 0.0, hyps, f"no approach line within {radius:g} of the touches that "
                 f"{leading[0].model} takes")
         _, contact, normal, directions, line = confirm
@@ -222,7 +227,7 @@ def propose(session, *, radius: float, angle: float = 60.0, candidates: int = CA
         if best is not None:
             gain, contact, normal, directions, line = best
             return Proposal(contact, normal, directions, gain, hyps[:n], approach=line)
-    return _located(session, leading, hyps, radius=radius, angle=angle) or Proposal(
+    return fallback() or Proposal(
         None, None, None, 0.0, hyps, f"no approach line within {radius:g} of the touches whose outcome the two "
         "leading hypotheses both predict")
 
