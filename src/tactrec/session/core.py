@@ -34,7 +34,12 @@ refinement (more searches only in step 5):
    score (:meth:`tactrec.recognition.Recognizer.recognize` with
    ``context``), and steps 2-4 run again on its poses; if still no pose fits
    them all at their noise, the touch kept before it is searched the same
-   way with the others in its score (:data:`STARTS`).  Each search is the
+   way with the others in its score (:data:`STARTS`).  When the best pose
+   does fit them all at their noise, the same searches cover its rivals:
+   the models every touch fits on its own whose joint pose does not fit them
+   all.  That pose may be one the joint fit missed (each touch's own poses
+   on the model place the others wrongly), and a model is never counted out
+   on a joint pose no search looked for.  Each search is the
    engine's (:mod:`tactrec.engine`): every place of each model at every
    rotation, screened with one point of each other touch's curves in the
    score, so it costs about what the touch's own search costs, whatever the
@@ -227,7 +232,8 @@ class Session(JointFit):
         return evidence([h.model for h in ranked], signed, curves, float(np.median([f.noise for f in self.features])),
                         limits=[fit_limit(self.features[i], self.floor) for i in keep],
                         touches=[len(self.features[i].curves) for i in keep], misses=misses,
-                        resolution=min(resolution(self.features[i], self.floor) for i in keep))
+                        resolution=min(resolution(self.features[i], self.floor) for i in keep),
+                        radii=[self.features[i].radius for i in keep])
 
     def _timed(self, stage: str, fn, *args, **kwargs):
         """``fn(*args, **kwargs)``, its seconds added to this add's ``stage`` (:data:`STAGES`)."""
@@ -241,17 +247,21 @@ class Session(JointFit):
         """Step 5: while no pose found fits every touch kept at their noise, search again from one of
         them with every other touch kept in the score: the new touch, then the one kept before it
         (:data:`STARTS`), over the models the new touch fits on its own whose pose does not fit
-        them all (every such model once the best pose fits them all but not at their noise); each
-        search stops once a pose fits the touches as well as their own searches fit each.
+        them all (every such model once the best pose fits them all but not at their noise; its
+        rivals, :meth:`_rivals`, once it fits them at their noise); each search stops once a pose
+        fits the touches as well as their own searches fit each.
         ``work``: what the touch's own search spent (the budget's unit, shared by the searches)."""
         budget = np.inf if self.search_budget is None or work <= 0 else self.search_budget * work
         use = [i for i in range(len(self.records)) if i not in slipped]
         fit = self.pooled(self._reference()[use], use)
         for start in use[::-1][:STARTS]:
             explained = self._explained(slipped)
-            if (explained and self._fitted()) or budget <= 0:
+            if budget <= 0:
                 return
-            among = self._unexplained(slipped, every=explained)
+            if explained and self._fitted():
+                among = self._rivals(use)
+            else:
+                among = self._unexplained(slipped, every=explained)
             if not among:
                 return
             others = [self.records[i] for i in use if i != start]
@@ -337,6 +347,22 @@ class Session(JointFit):
             own = r.error / r.scale if r.ok else (np.inf if r.deferred else None)
             if own is not None and own <= limit and (every or not fits_all):
                 out.append(r.model)
+        return out
+
+    def _rivals(self, use: list[int]) -> list[str]:
+        """The models step 5 searches once the best pose fits every touch at their noise: those every
+        touch ``use`` (indices) fits on its own (its own search's error within :meth:`_limits`) whose
+        joint pose does not fit them all.  Such a joint pose may be one the search missed, and a
+        model is never counted out on a pose no search looked for."""
+        limits = self._limits()
+        own = [{r.model: r.error / r.scale for r in self.records[i].own.ranking if r.ok} for i in use]
+        best = self.result.ranking[0].model
+        out = []
+        for h in self.result.ranking:
+            if h.model == best or all(h.consistent[i] for i in use):
+                continue
+            if all(h.model in errors and errors[h.model] <= limits[i] for i, errors in zip(use, own)):
+                out.append(h.model)
         return out
 
     def next(self, *, radius: float, angle: float = 60.0, candidates: int | None = None, rng=None):
