@@ -313,6 +313,10 @@ def build_parser() -> argparse.ArgumentParser:
     unknown_prior_option(p)
     p.set_defaults(func=cmd_serve)
 
+    from .cli_calibrate import add_calibrate_parser
+
+    add_calibrate_parser(sub, count=_count, methods=METHODS, default_method=DEFAULT_METHOD)
+
     from .cli_simulate import add_simulate_parser
 
     add_simulate_parser(sub, count=_count, positive=_positive, nonnegative=_nonnegative,

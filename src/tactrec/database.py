@@ -4,6 +4,7 @@ A database is a folder::
 
     DB/index.json              format, version, one entry per model
     DB/<name>-<hash>.npz       the model's arrays and its lookup table
+    DB/chance.json             the null model of chance fits, where fitted (``tactrec calibrate``)
 
 Arrays are plain ``.npz`` files read with ``allow_pickle=False``; each entry
 records the SHA-256 of its source file (a changed source is rebuilt, an
@@ -49,6 +50,7 @@ class Database:
 
     entries: list[ModelEntry]
     path: Path | None = None
+    chance: object = None          # its null model of chance fits (tactrec.chance), where fitted on these models
 
     def __iter__(self):
         return iter(self.entries)
@@ -185,7 +187,14 @@ def load_database(path: str | os.PathLike, *, warn=None) -> Database:
             warn(f"{src}: changed since the database was built; run 'tactrec build' to update {db}")
     if not entries:
         raise InputError("the database holds no models", db)
-    return Database(entries, db)
+    from . import chance
+
+    stored = chance.load(db)
+    if stored is not None and stored.key != chance.catalogue_key(entries):
+        if warn is not None:
+            warn(f"{db / chance.FILE}: fitted on other models; run 'tactrec calibrate --db {db}' again")
+        stored = None
+    return Database(entries, db, stored)
 
 
 def _stored_blob(model, tips=()) -> tuple[bytes, int]:

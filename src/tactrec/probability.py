@@ -80,14 +80,14 @@ from typing import Sequence
 
 import numpy as np
 
+from .bootstrap import REPLICATES, SEED, bootstrap_probabilities, lag_one
+
 __all__ = ["Evidence", "residuals", "evidence", "bootstrap_probabilities", "noise_fit", "fit_limit", "resolution",
            "fit_standard_error", "fit_spread", "open_world", "AMBIGUOUS", "REPLICATES", "UNKNOWN_PRIOR",
            "CONSISTENT_SE", "NOISE_VARIANCE", "SEARCH_MISS"]
 
 #: a result is ambiguous when its confidence (the best model's probability) is below this
 AMBIGUOUS = 0.95
-#: bootstrap replicates, and the seed they are drawn from
-REPLICATES, SEED = 2000, 20_261_123
 #: the prior probability that a touch (or session) comes from none of the database's models
 UNKNOWN_PRIOR = 0.5
 #: the probability that the search leaves the touched model's true pose unfound, its best pose beyond the fit
@@ -136,7 +136,8 @@ def fit_spread(limit: float, points: int) -> float:
 
 
 def open_world(shares: np.ndarray, excess: np.ndarray, prior: float = UNKNOWN_PRIOR,
-               miss: float = SEARCH_MISS, touches: int = 1) -> tuple[np.ndarray, float]:
+               miss: float = SEARCH_MISS, touches: int = 1, *, ratio: float | None = None,
+               lines: np.ndarray | None = None) -> tuple[np.ndarray, float]:
     """Each model's probability and that of ``unknown`` (none of them), summing to 1.
 
     ``shares (k,)``: each model's share of the bootstrap replicates it fits best in (sum 1);
@@ -156,7 +157,17 @@ def open_world(shares: np.ndarray, excess: np.ndarray, prior: float = UNKNOWN_PR
     So a model whose pose fails the test on some touch never takes more than ``1 - prior`` of the
     probability, and far beyond the edge at most ``(1 - prior) miss / ((1 - prior) miss + prior)``;
     one within the noise on every touch leaves unknown about
-    ``prior exp(-touches CONSISTENT_SE^2 / 2) / ((1 - prior) (1 - miss))``, less with every touch."""
+    ``prior exp(-touches CONSISTENT_SE^2 / 2) / ((1 - prior) (1 - miss))``, less with every touch.
+
+    With the database's null model of chance fits (:mod:`tactrec.chance`), ``ratio`` is its
+    likelihood ratio, known against unknown, of the touches' best fits: it replaces the fit test's
+    fixed weight for the search over every pose of every model (the chance that some pose of some
+    model fits by chance, and that the search missed the truth's, are both in it).  A session's
+    further touches test the pose that search found, a prediction with nothing left to choose: each
+    counts as before, at the worst touch's excess, and ``lines (k,)`` (the largest excess of a line
+    that met nothing, or None) counts against its pose once:
+    ``p(M) ~ (1 - prior) share(M) ratio ((1 - miss) G + miss)``,
+    ``G = exp(-(touches - 1) (max(excess, 0)^2 - CONSISTENT_SE^2) / 2 - max(lines, 0)^2 / 2)``."""
     if not 0.0 <= prior < 1.0:
         raise ValueError(f"the prior of unknown must lie in [0, 1), not {prior!r}")
     if not 0.0 <= miss < 1.0:
@@ -167,8 +178,13 @@ def open_world(shares: np.ndarray, excess: np.ndarray, prior: float = UNKNOWN_PR
     z = np.maximum(np.asarray(excess, dtype=np.float64), 0.0)
     n = max(int(touches), 1)
     with np.errstate(under="ignore", over="ignore"):
-        weight = np.exp(np.minimum(-0.5 * n * (z * z - CONSISTENT_SE ** 2), 600.0))
-        known = (1.0 - prior) * shares * ((1.0 - miss) * weight + miss)
+        if ratio is None:
+            weight = np.exp(np.minimum(-0.5 * n * (z * z - CONSISTENT_SE ** 2), 600.0))
+            known = (1.0 - prior) * shares * ((1.0 - miss) * weight + miss)
+        else:
+            cut = 0.0 if lines is None else np.maximum(np.asarray(lines, dtype=np.float64), 0.0) ** 2
+            weight = np.exp(np.minimum(-0.5 * (n - 1) * (z * z - CONSISTENT_SE ** 2) - 0.5 * cut, 600.0))
+            known = (1.0 - prior) * shares * float(ratio) * ((1.0 - miss) * weight + miss)
     unknown = float(prior)
     total = float(known.sum()) + unknown
     if total <= 0.0:                                                  # a closed world and no pose near a fit
@@ -212,6 +228,9 @@ class Evidence:
     resolution : float
         The least distance a fit is read at (data units, :func:`resolution`): the shares compare
         the distances with those below it read as it.
+    radii : tuple of float
+        Per touch, its radius (data units): with ``limits``, how much it resolves
+        (:mod:`tactrec.chance`); empty where not recorded.
     """
 
     models: tuple
@@ -223,6 +242,7 @@ class Evidence:
     touches: tuple = ()
     misses: np.ndarray | None = None
     resolution: float = 0.0
+    radii: tuple = ()
 
     @property
     def block(self) -> int:
@@ -241,10 +261,10 @@ class Evidence:
         per = self.touches or (len(sizes),)
         return np.add.reduceat(sizes, np.concatenate([[0], np.cumsum(per)[:-1]])) if len(sizes) else np.zeros(0, int)
 
-    def excess(self) -> np.ndarray:
+    def excess(self, *, lines: bool = True) -> np.ndarray:
         """Per model ``(k,)``: by how many standard errors (:func:`fit_spread`) its pose's mean distance
-        exceeds the fit limit on the touch it fits worst (negative within the noise), or a missed
-        line's excess where that is larger."""
+        exceeds the fit limit on the touch it fits worst (negative within the noise), or (``lines``)
+        a missed line's excess where that is larger."""
         k = len(self.models)
         if not self.limits or k == 0:
             return np.full(k, -np.inf)
@@ -256,22 +276,51 @@ class Evidence:
             spread = fit_spread(limit, m)
             z[:, j] = (mean - limit) / spread if spread > 0 else np.where(mean > limit, np.inf, -np.inf)
         worst = z.max(axis=1)
-        if self.misses is not None and np.size(self.misses):
+        if lines and self.misses is not None and np.size(self.misses):
             worst = np.maximum(worst, np.asarray(self.misses, dtype=np.float64).max(axis=1))
         return worst
 
+    def chance_statistics(self) -> tuple[float, float, float]:
+        """``(x1, x2, r)`` for the null model of chance fits (:mod:`tactrec.chance`): the best two
+        models' fits, each its mean distance over every point against the points-weighted mean of
+        the touches' limits (:func:`tactrec.chance.statistic`), and the touches' median resolving
+        power ``log10(radius / limit)``."""
+        from .chance import SPAN, statistic
+
+        points = self.touch_points()
+        total = max(int(points.sum()), 1)
+        limit = float((np.asarray(self.limits) * points).sum() / total)          # element-wise: no BLAS
+        means = np.sort(self.distances.sum(axis=1) / total)[:2]
+        x = [float(statistic(v, limit)) for v in means] + [SPAN] * (2 - len(means))
+        r = float(np.median(np.log10(np.asarray(self.radii, dtype=np.float64) / np.asarray(self.limits))))
+        return x[0], x[1], r
+
     def outcomes(self, *, prior: float = UNKNOWN_PRIOR, miss: float = SEARCH_MISS, replicates: int = REPLICATES,
-                 rng=SEED) -> tuple[np.ndarray, float]:
+                 rng=SEED, chance=None) -> tuple[np.ndarray, float]:
         """Each model's probability ``(k,)`` and that of ``unknown`` (:func:`open_world`; sum 1).  Without
-        ``limits`` (a closed world) unknown is 0 and the models' probabilities are their shares."""
+        ``limits`` (a closed world) unknown is 0 and the models' probabilities are their shares.
+        ``chance``: the database's null model of chance fits (:class:`tactrec.chance.NullModel`), whose
+        likelihood ratio then weighs the touches against unknown (:func:`open_world`'s ``ratio``)."""
         shares = self.shares(replicates=replicates, rng=rng)
         if not self.limits:
             return shares, 0.0
-        return open_world(shares, self.excess(), prior, miss, max(len(self.limits), 1))
+        ratio = None
+        if chance is not None and len(self.radii) == len(self.limits) and len(self.models):
+            ratio = chance.ratio(*self.chance_statistics())
+        if ratio is None:
+            return open_world(shares, self.excess(), prior, miss, max(len(self.limits), 1))
+        return open_world(shares, self.excess(lines=False), prior, miss, max(len(self.limits), 1), ratio=ratio,
+                          lines=self.line_excess())
 
-    def named_outcomes(self, *, prior: float = UNKNOWN_PRIOR) -> tuple[dict[str, float], float]:
+    def line_excess(self) -> np.ndarray | None:
+        """Per model ``(k,)``: the largest excess of a line that met nothing (None without such lines)."""
+        if self.misses is None or not np.size(self.misses):
+            return None
+        return np.asarray(self.misses, dtype=np.float64).max(axis=1)
+
+    def named_outcomes(self, *, prior: float = UNKNOWN_PRIOR, chance=None) -> tuple[dict[str, float], float]:
         """:meth:`outcomes` with each model's probability by name: ``({model: p}, unknown)``."""
-        p, unknown = self.outcomes(prior=prior)
+        p, unknown = self.outcomes(prior=prior, chance=chance)
         return dict(zip(self.models, p.tolist())), unknown
 
     def probabilities(self, *, prior: float = UNKNOWN_PRIOR, replicates: int = REPLICATES,
@@ -283,7 +332,7 @@ class Evidence:
         out = {"models": list(self.models), "distances": np.round(self.distances, 7).tolist(),
                "curve_sizes": list(self.curve_sizes), "rho": self.rho, "noise": self.noise,
                "limits": [float(x) for x in self.limits], "touches": list(self.touches),
-               "resolution": float(self.resolution)}
+               "resolution": float(self.resolution), "radii": [float(x) for x in self.radii]}
         if self.misses is not None:
             out["misses"] = np.asarray(self.misses, dtype=np.float64).tolist()
         return out
@@ -298,64 +347,19 @@ class Evidence:
         return cls(tuple(d["models"]), np.asarray(d["distances"], dtype=np.float64).reshape(k, m),
                    tuple(int(n) for n in d["curve_sizes"]), float(d["rho"]), float(d.get("noise", 0.0)),
                    tuple(float(x) for x in d.get("limits", ())), tuple(int(n) for n in d.get("touches", ())), misses,
-                   float(d.get("resolution", 0.0)))
-
-
-def _lag_one(res: Sequence[np.ndarray]) -> float:
-    """Pooled lag-one autocorrelation of the residual sequences ``res`` (each along one curve)."""
-    num = den = 0.0
-    for r in res:
-        r = np.asarray(r, dtype=np.float64)
-        if len(r) < 3:
-            continue
-        r = r - r.mean()
-        num += float(np.sum(r[1:] * r[:-1]))
-        den += float(np.sum(r * r))
-    return num / den if den > 0 else 0.0
+                   float(d.get("resolution", 0.0)), tuple(float(x) for x in d.get("radii", ())))
 
 
 def evidence(models: Sequence[str], signed: Sequence[np.ndarray], curve_sizes: Sequence[int],
              noise: float = 0.0, *, limits: Sequence[float] = (), touches: Sequence[int] = (),
-             misses=None, resolution: float = 0.0) -> Evidence:
+             misses=None, resolution: float = 0.0, radii: Sequence[float] = ()) -> Evidence:
     """The :class:`Evidence` from each accepted model's signed residuals ``(m,)`` (best model first;
-    curves in order, ``curve_sizes`` points each; ``limits``, ``touches``, ``misses`` and
-    ``resolution`` as there)."""
+    curves in order, ``curve_sizes`` points each; ``limits``, ``touches``, ``misses``,
+    ``resolution`` and ``radii`` as there)."""
     sizes = tuple(int(n) for n in curve_sizes)
     m = sum(sizes)
     rows = [np.abs(np.asarray(r, dtype=np.float64)) for r in signed]
-    rho = _lag_one(np.split(np.asarray(signed[0], dtype=np.float64), np.cumsum(sizes)[:-1])) if rows else 0.0
+    rho = lag_one(np.split(np.asarray(signed[0], dtype=np.float64), np.cumsum(sizes)[:-1])) if rows else 0.0
     return Evidence(tuple(models), np.array(rows).reshape(len(rows), m), sizes, float(rho), float(noise),
-                    tuple(float(x) for x in limits), tuple(int(n) for n in touches), misses, float(resolution))
-
-
-def _draws(curve_sizes: Sequence[int], block: int, replicates: int, rng) -> np.ndarray:
-    """Indices of the points drawn in each replicate ``(B, m)``: blocks of ``block`` consecutive
-    points within one curve, starts uniform over the valid ones, until ``m`` points."""
-    sizes = np.asarray(curve_sizes, dtype=np.int64)
-    offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]])
-    starts = np.concatenate([o + np.arange(max(n - block + 1, 1)) for o, n in zip(offsets, sizes)])
-    m = int(sizes.sum())
-    blocks = -(-m // block)
-    first = starts[rng.integers(len(starts), size=(replicates, blocks))]            # (B, blocks)
-    return (first[:, :, None] + np.arange(block)[None, None, :]).reshape(replicates, -1)[:, :m]
-
-
-def bootstrap_probabilities(distances: np.ndarray, curve_sizes: Sequence[int], *, block: int = 1,
-                            replicates: int = REPLICATES, rng=SEED) -> np.ndarray:
-    """Each row's share of the replicates in which its mean over its resampled points is least.
-
-    ``distances (k, m)``: each model's distances to the ``m`` points, each row resampled on its
-    own draws; returns ``(k,)``, summing to 1 (ties shared; empty for no model)."""
-    d = np.asarray(distances, dtype=np.float64)
-    k = len(d)
-    if k == 0:
-        return np.zeros(0)
-    if k == 1:
-        return np.ones(1)
-    rng = np.random.default_rng(rng)
-    means = np.stack([d[i][_draws(curve_sizes, int(block), int(replicates), rng)].mean(axis=1) for i in range(k)],
-                     axis=1)                                                         # (B, k)
-    least = means.min(axis=1, keepdims=True)
-    tied = means <= least * (1.0 + 1e-12) + 1e-300
-    share = tied / tied.sum(axis=1, keepdims=True)
-    return share.mean(axis=0)
+                    tuple(float(x) for x in limits), tuple(int(n) for n in touches), misses, float(resolution),
+                    tuple(float(x) for x in radii))

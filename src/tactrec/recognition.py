@@ -78,6 +78,9 @@ class Recognition:
         stall up to as much again; None for a method without one).
     unknown_prior : float
         The prior probability that the touch came from none of the models (:mod:`tactrec.probability`).
+    chance : NullModel or None
+        The database's null model of chance fits (:mod:`tactrec.chance`), None where it has none:
+        then ``unknown`` comes from the fit test alone.
     """
 
     best: str | None
@@ -92,12 +95,13 @@ class Recognition:
     touch: Touch | None = None
     allowed: int | None = None
     unknown_prior: float = UNKNOWN_PRIOR
+    chance: object = None
 
     @functools.cached_property
     def _outcomes(self) -> tuple[dict[str, float], float]:
         if self.evidence is None:
             return {}, 1.0 if self.best is None else 0.0
-        return self.evidence.named_outcomes(prior=self.unknown_prior)
+        return self.evidence.named_outcomes(prior=self.unknown_prior, chance=self.chance)
 
     @property
     def probabilities(self) -> dict[str, float]:
@@ -159,6 +163,7 @@ class Recognition:
             "method": self.method,
             "confidence": self.confidence,
             "unknown": self.unknown,
+            "calibrated": self.chance is not None,
             "ambiguous": self.ambiguous,
             "located": self.located,
             "settled": self.settled,
@@ -232,6 +237,9 @@ class Recognizer:
     unknown_prior : float
         The prior probability that a touch came from none of the models, in [0, 1)
         (:data:`~tactrec.probability.UNKNOWN_PRIOR`; 0: a closed world).
+    chance : NullModel or None
+        The models' null model of chance fits (:mod:`tactrec.chance`; a database's, where it holds
+        one fitted on these models); None: ``unknown`` from the fit test alone.
     tips : iterable of float
         Radii of round tips (the models' units) whose offset fields every mesh prepares now, before
         the workers fork (:mod:`tactrec.surfaces.mesh_offset`: read from the stored fields up to
@@ -243,10 +251,11 @@ class Recognizer:
 
     def __init__(self, models: Iterable[ModelEntry], *, method: str = DEFAULT_METHOD, workers: int = 1,
                  window: int | str | None = "auto", degree: int = 3, curvature_method: str = "auto",
-                 unknown_prior: float = UNKNOWN_PRIOR, tips: Iterable[float] = (), **options):
+                 unknown_prior: float = UNKNOWN_PRIOR, chance=None, tips: Iterable[float] = (), **options):
         if not (isinstance(unknown_prior, (int, float)) and 0.0 <= unknown_prior < 1.0):
             raise InputError(f"the prior of unknown must be a number in [0, 1), not {unknown_prior!r}", "unknown_prior")
         self.unknown_prior = float(unknown_prior)
+        self.chance = chance if chance is not None else getattr(models, "chance", None)
         self.method = get_method(method)
         self.config = self.method.configure(**options)
         self.models = list(models)
@@ -356,9 +365,9 @@ class Recognizer:
         limit = max(fit_limit(touch, self.floor), touch.fit)
         found = evidence([r.model for r in ok], [self._residuals(r, touch) for r in ok],
                          [len(c) for c in touch.joint_curves], touch.noise, limits=(limit,),
-                         resolution=resolution(touch, self.floor))
+                         resolution=resolution(touch, self.floor), radii=(touch.radius,))
         out = Recognition(best, ranking, touch.estimate, 0.0, self.method.name, found, outcome.settled, outcome.work,
-                          outcome.depth, touch, outcome.allowed, self.unknown_prior)
+                          outcome.depth, touch, outcome.allowed, self.unknown_prior, self.chance)
         out.probabilities                        # the probabilities are part of the recognition and of its seconds
         object.__setattr__(out, "seconds", time.perf_counter() - start)          # set once, before anyone sees it
         return out

@@ -23,14 +23,17 @@ __all__ = ["spread", "paper_values", "instance_rng", "random_face_site", "run_pa
 _RECOGNIZERS: dict = {}
 
 
-def recognizer(models, *, method: str = "fast", **options):
+def recognizer(models, *, method: str = "fast", calibrated: bool = False, **options):
     """A :class:`~tactrec.recognition.Recognizer` for ``models`` (a list of entries) kept for the rest of
-    this process: its models are prepared and its worker processes started once."""
+    this process: its models are prepared and its worker processes started once; ``calibrated``: with
+    their null model of chance fits (:func:`null_model`)."""
     from ..recognition import Recognizer, default_workers
 
-    key = (tuple(id(e) for e in models), method, tuple(sorted(options.items())))
+    key = (tuple(id(e) for e in models), method, calibrated, tuple(sorted(options.items())))
     if key not in _RECOGNIZERS:
-        _RECOGNIZERS[key] = (Recognizer(models, method=method, workers=default_workers(), **options), list(models))
+        chance = null_model(models) if calibrated else None
+        _RECOGNIZERS[key] = (Recognizer(models, method=method, workers=default_workers(), chance=chance, **options),
+                             list(models))
     return _RECOGNIZERS[key][0]
 
 
@@ -138,7 +141,30 @@ def _default(obj):
 
 #: the sources every recognition depends on (files, or folders of ``.py`` files, relative to the package)
 CORE_SOURCES = ("io", "estimation.py", "features.py", "linalg.py", "simulation.py", "tables.py", "recognition.py",
-                "runner.py", "tip.py", "outliers.py", "probability.py", "surfaces", "registration", "methods", "engine")
+                "runner.py", "tip.py", "outliers.py", "probability.py", "bootstrap.py", "chance", "surfaces", "registration", "methods",
+                "engine")
+
+
+def null_model(entries):
+    """The null model of chance fits of the models ``entries`` (:mod:`tactrec.chance`): fitted once, with
+    ``ceil(160 / models)`` touches a model (at least 4) from seed 0, and kept in the cache folder under the
+    models' key and the sources' hash."""
+    import math
+
+    from ..chance import catalogue_key, load, save
+    from ..chance.fit import calibrate
+    from ..database import cache_folder
+    from ..recognition import Recognizer, default_workers
+
+    key = catalogue_key(entries)
+    folder = cache_folder() / "chance" / f"{key[:20]}-{sources_hash(*CORE_SOURCES)}"
+    found = load(folder, key)
+    if found is None:
+        with Recognizer(entries, workers=default_workers()) as r:
+            found = calibrate(r, touches=max(4, math.ceil(160 / len(entries))), seed=0)
+        folder.mkdir(parents=True, exist_ok=True)
+        save(found, folder)
+    return found
 
 
 def sources_hash(*relative: str) -> str:

@@ -44,6 +44,12 @@ answer.  Sets:
     reach of the bump but clear of it: only a touch of the bump tells them
     apart; ``instances`` sessions per scan.
 
+The probabilities of ``hard-10`` and ``near-duplicates`` come with their
+database's null model of chance fits (:mod:`tactrec.chance`, fitted once on
+that database, :func:`tactrec.bench.common.null_model`; a near-duplicates
+pair has its own); ``p3-78`` and ``similar`` (a database per scan) are
+scored by the fit test alone (:data:`CALIBRATED`).
+
 Reported per set and strategy (:mod:`tactrec.bench.multi_touch_report`),
 after 1 to 5 touches: accuracy, mean confidence, ECE, and how often the
 session has found the true pose (its pose of the true model fits the touches
@@ -86,7 +92,7 @@ from ..session.result import Hypothesis
 from ..simulation import random_rigid_motion, sensor_to_world, simulate_world_touch
 from ..surfaces import BUILTIN_SETS
 from . import multi_touch_report as report
-from .common import (CORE_SOURCES, instance_rng, random_face_site, recognizer, run_parallel, saved_record,
+from .common import (CORE_SOURCES, instance_rng, null_model, random_face_site, recognizer, run_parallel, saved_record,
                      sources_hash, write_json)
 
 __all__ = ["run", "SETS", "TOUCHES", "STRATEGIES", "SIMILAR", "similar_scans", "shape_signature"]
@@ -103,6 +109,9 @@ SPECS = {"hard-10": {"length": 12.0, "angle": 30.0, "noise": 0.05, "outward": Fa
          "near-duplicates": {"length": 12.0, "angle": 30.0, "noise": 0.05, "outward": False},
          "p3-78": {"length": 24.0, "angle": 60.0, "noise": 0.0, "outward": True}}
 SPACING = 0.3
+#: the sets whose databases have their null model of chance fits (:mod:`tactrec.chance`); the others'
+#: probabilities come from the fit test alone (a database per session, or 78 scans to calibrate)
+CALIBRATED = ("hard-10", "near-duplicates")
 #: a random next touch: places within reach tried (a touch the estimator refuses is no place) and
 #: sites drawn in all to find them
 ATTEMPTS = 60
@@ -247,9 +256,14 @@ def _session(task) -> dict:
     if kind in ("similar", "near-duplicates"):   # a database of its own: its worker processes end with the session
         from ..recognition import Recognizer, default_workers
 
-        with Recognizer(entries, workers=default_workers()) as own:
+        with Recognizer(entries, workers=default_workers(), chance=_null(kind, entries)) as own:
             return _run_session(task, own, entry, first)
-    return _run_session(task, recognizer(entries), entry, first)
+    return _run_session(task, recognizer(entries, calibrated=kind in CALIBRATED), entry, first)
+
+
+def _null(kind: str, entries):
+    """The null model of chance fits of a set's database (:data:`CALIBRATED`), or None."""
+    return null_model(entries) if kind in CALIBRATED else None
 
 
 def _run_session(task, recognizer_, entry, first) -> dict:
@@ -321,6 +335,8 @@ def run(*, out, instances: int = 10, seed: int = 0, jobs: int | None = None, qui
         if kind in sets:
             tasks += [(kind, m, i, seed) for m in range(len(ycb_names())) for i in range(math.ceil(instances / 10))]
     jobs_ = [(t + (strategy,), folders[strategy]) for t in tasks for strategy in strategies]
+    for kind, m in sorted({t[:2] for t in tasks if t[0] in CALIBRATED}):       # fitted once, before the workers
+        _null(kind, _first(kind, m, 0, seed)[0])
     records = _merged(run_parallel(_saved, jobs_, jobs=jobs or 1, quiet=quiet, desc="multi-touch"))
     by_set = {s: [r for r in records if r["set"] == s] for s in sets}
     table = {"benchmark": "multi-touch", "instances": instances, "seed": seed, "radius_mm": RADIUS,

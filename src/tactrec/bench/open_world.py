@@ -28,6 +28,12 @@ default prior of unknown (:data:`tactrec.probability.UNKNOWN_PRIOR`):
   (:func:`tactrec.bench.calibration.expected_calibration_error`), and how
   often an outcome at probability >= 0.95 is right;
 * sessions: how often ``unknown`` reaches 0.9 within 1, 2 and 3 touches.
+
+Each set is scored with its null model of chance fits (:mod:`tactrec.chance`,
+fitted on the set's own scans by :func:`tactrec.bench.common.null_model`,
+seeded apart from the touches), and again by the fit test alone
+(:data:`FIT_TEST`).  A left-out scan's sessions are scored with the whole
+set's null model.
 """
 
 from __future__ import annotations
@@ -43,7 +49,8 @@ from ..probability import CONSISTENT_SE, UNKNOWN_PRIOR, Evidence
 from ..simulation import random_rigid_motion, sensor_to_world
 from ..surfaces import BUILTIN_SETS
 from .calibration import ece_if_calibrated, expected_calibration_error
-from .common import CORE_SOURCES, instance_rng, recognizer, run_parallel, saved_record, sources_hash, write_json
+from .common import (CORE_SOURCES, instance_rng, null_model, recognizer, run_parallel, saved_record, sources_hash,
+                     write_json)
 
 __all__ = ["run", "SCAN_SETS", "PROTOCOLS", "SESSION_TOUCHES", "outcome", "beyond_test"]
 
@@ -53,6 +60,8 @@ PROTOCOLS = ("p3", "hard")
 SESSION_TOUCHES = 3
 #: the targets: unknown most probable on this share of unknown touches; sessions reaching unknown >= SURE_UNKNOWN
 UNKNOWN_TARGET, SURE, SURE_UNKNOWN = 95.0, 0.95, 0.9
+#: the rows scored without the null model of chance fits, by the fit test alone, beside
+FIT_TEST = ", fit test alone"
 
 
 def _code_hash() -> str:
@@ -124,13 +133,13 @@ def _saved(job):
     return saved_record(folder / f"{name}.json", lambda: fn(task))
 
 
-def outcome(evidence: dict | None, prior: float = UNKNOWN_PRIOR) -> tuple[str, float, float]:
+def outcome(evidence: dict | None, prior: float = UNKNOWN_PRIOR, chance=None) -> tuple[str, float, float]:
     """The most probable outcome of a saved evidence (a model's name or ``"unknown"``), its probability
-    and the probability of unknown."""
+    and the probability of unknown (``chance``: the database's null model of chance fits, or None)."""
     if evidence is None:
         return "unknown", 1.0, 1.0
     found = Evidence.from_json(evidence)
-    p, unknown = found.outcomes(prior=prior)
+    p, unknown = found.outcomes(prior=prior, chance=chance)
     if len(p) and p.max() > unknown:
         k = int(np.argmax(p))
         return found.models[k], float(p[k]), unknown
@@ -153,9 +162,10 @@ def _percent(values) -> float | None:
     return 100.0 * float(np.mean(values)) if values else None
 
 
-def _touch_summary(rows: list[dict], prior: float) -> dict:
-    known = [outcome(r["known"]["evidence"], prior) + (r["model"], r["known"]["recognized"]) for r in rows]
-    unknown = [outcome(r["unknown"]["evidence"], prior) for r in rows]
+def _touch_summary(rows: list[dict], prior: float, nulls: dict) -> dict:
+    known = [outcome(r["known"]["evidence"], prior, nulls.get(r["scans"])) + (r["model"], r["known"]["recognized"])
+             for r in rows]
+    unknown = [outcome(r["unknown"]["evidence"], prior, nulls.get(r["scans"])) for r in rows]
     conf = [k[1] for k in known] + [u[1] for u in unknown]
     right = [k[0] == k[3] for k in known] + [u[0] == "unknown" for u in unknown]
     sure = [ok for c, ok in zip(conf, right) if c >= SURE]
@@ -173,13 +183,12 @@ def _touch_summary(rows: list[dict], prior: float) -> dict:
                         for k, v in seconds.items()}}
 
 
-def _session_summary(rows: list[dict], prior: float) -> dict:
-    reached = []
+def _session_summary(rows: list[dict], prior: float, nulls: dict) -> dict:
+    reached, sure_wrong = [], 0
     for r in rows:
-        u = [outcome(s["evidence"], prior)[2] for s in r["steps"]]
-        reached.append([any(x >= SURE_UNKNOWN for x in u[:n]) for n in range(1, SESSION_TOUCHES + 1)])
-    sure_wrong = sum(any(outcome(s["evidence"], prior)[0] != "unknown" and outcome(s["evidence"], prior)[1] >= SURE
-                         for s in r["steps"]) for r in rows)
+        found = [outcome(s["evidence"], prior, nulls.get(r["scans"])) for s in r["steps"]]
+        reached.append([any(f[2] >= SURE_UNKNOWN for f in found[:n]) for n in range(1, SESSION_TOUCHES + 1)])
+        sure_wrong += any(f[0] != "unknown" and f[1] >= SURE for f in found)
     return {"sessions": len(rows),
             "unknown_by_touches_percent": [_percent(x[n] for x in reached) for n in range(SESSION_TOUCHES)],
             "sure_wrong": int(sure_wrong)}
@@ -197,15 +206,17 @@ def run(*, out, instances: int = 5, seed: int = 0, jobs: int | None = None, quie
         tasks += [(scans, m, i, seed, p) for p in PROTOCOLS for m in range(n) for i in range(instances)]
         tasks += [(scans, m, i, seed) for m in range(n) for i in range(math.ceil(instances / 5))]
     records = run_parallel(_saved, [(t, folder) for t in tasks], jobs=jobs or 1, quiet=quiet, desc="open-world")
+    from .fast_vs_paper import _database
+
     summary = {}
-    for scans in sets:
-        for p in PROTOCOLS:
-            rows = [r for r in records if r["kind"] == "touch" and r["scans"] == scans and r["protocol"] == p]
-            summary[f"{scans}/{p}"] = _touch_summary(rows, prior)
-        summary[f"{scans}/sessions"] = _session_summary(
-            [r for r in records if r["kind"] == "session" and r["scans"] == scans], prior)
-    mixed = [r for r in records if r["kind"] == "touch"]
-    summary["all touches"] = _touch_summary(mixed, prior)
+    for label, nulls in (("", {s: null_model(_database(_models(s)).entries) for s in sets}), (FIT_TEST, {})):
+        for scans in sets:
+            for p in PROTOCOLS:
+                rows = [r for r in records if r["kind"] == "touch" and r["scans"] == scans and r["protocol"] == p]
+                summary[f"{scans}/{p}{label}"] = _touch_summary(rows, prior, nulls)
+            summary[f"{scans}/sessions{label}"] = _session_summary(
+                [r for r in records if r["kind"] == "session" and r["scans"] == scans], prior, nulls)
+        summary[f"all touches{label}"] = _touch_summary([r for r in records if r["kind"] == "touch"], prior, nulls)
     table = {"benchmark": "open-world", "instances": instances, "seed": seed, "prior": prior,
              "targets": {"unknown_top_percent": UNKNOWN_TARGET, "sure": SURE, "session_unknown": SURE_UNKNOWN},
              "summary": summary, "records": records}
@@ -222,7 +233,8 @@ def _cell(x, fmt="{:.1f}%") -> str:
 
 def _text(table: dict) -> str:
     lines = [f"Leave-one-out, fast, seed {table['seed']}, {table['instances']} touches per scan and protocol, "
-             f"prior of unknown {table['prior']:g}.", "",
+             f"prior of unknown {table['prior']:g}; each set's probabilities from its null model of chance fits "
+             f"(tactrec.chance, fitted on the set's own scans), and '{FIT_TEST[2:]}' by the fit test without it.", "",
              "| scans / protocol | touches | unknown most probable (left out) | median p(unknown) | "
              "top-1 open (known) | top-1 closed (known) | known called unknown | own model beyond the test | "
              "ECE (all outcomes) | "

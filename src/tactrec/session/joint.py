@@ -112,6 +112,7 @@ class JointFit:
         rejected = {e.name: "no pose from any touch" for e in self.recognizer.models if e.name not in found}
         return SessionResult(ranked, self._evidence(ranked, keep), slipped, n, rejected, 0.0,
                              self.features[-1].geometry, unknown_prior=self.recognizer.unknown_prior,
-                             missed=len(self.misses), outliers=tuple(f.outliers for f in self.features))
+                             missed=len(self.misses), outliers=tuple(f.outliers for f in self.features),
+                             chance=self.recognizer.chance)
 
 

@@ -76,7 +76,8 @@ class SessionResult:
     the add's ``seconds`` by part (:data:`tactrec.session.STAGES`: the touch's own search, the
     joint fits, the search with the other touches in the score); ``missed`` the lines that met
     nothing (:meth:`tactrec.session.Session.add_miss`); ``outliers`` how many points each touch set
-    aside as off its curve's trace (:mod:`tactrec.outliers`).
+    aside as off its curve's trace (:mod:`tactrec.outliers`); ``chance`` the database's null model
+    of chance fits (:mod:`tactrec.chance`, None where it has none).
     """
 
     ranking: list
@@ -90,6 +91,7 @@ class SessionResult:
     unknown_prior: float = UNKNOWN_PRIOR
     missed: int = 0
     outliers: tuple = ()
+    chance: object = None
 
     @property
     def best(self) -> str | None:
@@ -104,7 +106,7 @@ class SessionResult:
     def _outcomes(self) -> tuple[dict[str, float], float]:
         if self.evidence is None:
             return {}, 1.0
-        return self.evidence.named_outcomes(prior=self.unknown_prior)
+        return self.evidence.named_outcomes(prior=self.unknown_prior, chance=self.chance)
 
     @property
     def probabilities(self) -> dict[str, float]:

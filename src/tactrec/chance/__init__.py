@@ -1,0 +1,214 @@
+"""The null model of chance fits: how likely a touch's fits are to come from an object the
+database does not hold.
+
+A touch may fit a model within its noise because it touched that model, or because a small,
+noisy touch fits an unrelated surface (a flat patch fits every flat face, a patch of one fruit
+another fruit).  How often the second happens depends on the touch (how much surface it spans
+against its noise) and on the catalogue (how alike its models are), so it is measured on the
+catalogue itself, the way a sequence search measures the chance hits behind its E-values
+(:mod:`.fit`): seeded touches of each model are recognised twice, once with the whole database
+(*known*: the touched model is in it) and once with the touched model left out (*unknown*: the
+touch is of an object the database does not hold).
+
+Each recognition gives two statistics, the best model's fit ``x1`` and the second best's ``x2``
+(:func:`statistic`: ``log10`` of the mean distance over the fit limit,
+:func:`tactrec.probability.fit_limit`, clipped to ``[-2, 2]``; ``x2 = 2`` without a second
+model), and each touch its resolving power ``r = log10(radius / fit limit)``.  A chance fit is
+seldom alone: where the touched model fits, the others usually fit much worse (``x2 - x1``
+large); where an unrelated model fits by chance, others usually fit nearly as well.
+
+For a new touch, the likelihood ratio of known against unknown (:meth:`NullModel.ratio`) is a
+logistic regression's odds between the two classes, on the best fit ``x1`` and its lead over the
+second ``x2 - x1``, fitted over the calibration touches nearest the touch in ``r``
+(:data:`NEAREST`; each gives one known and one unknown, so the odds are the likelihood ratio).
+The regression is monotone where the evidence is (a better fit, a larger lead), and smooth where
+the touches are few; each standardised coefficient has a unit Gaussian prior, so that classes the
+touches separate completely do not run to infinity, and the ratio is held within ``1 / (k + 1)``
+and ``k + 1`` over ``k`` touches: no ratio claims more than that many calibration touches can show.
+A touch more (less) resolving than every calibration touch is read as the most (least)
+resolving of them.  :func:`tactrec.probability.open_world` turns the ratio into ``unknown``'s
+probability and the models'.
+
+The model is stored with the database (:data:`FILE`, plain JSON, keyed by the models' content:
+:func:`catalogue_key`) and fitted again when the models change (``tactrec calibrate``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from ..io.atomic import write_text_atomic
+
+__all__ = ["NullModel", "statistic", "catalogue_key", "load", "save", "FILE", "FORMAT", "VERSION", "NEAREST",
+           "SPAN"]
+
+FORMAT, VERSION = "tactrec-chance", 1
+#: the null model's file in a database folder
+FILE = "chance.json"
+#: a touch's ratio is fitted over at least this many calibration touches, the nearest in resolving
+#: power, or a quarter of them where that is more
+NEAREST = 20
+#: the statistics' range: a fit this many decades better or worse than its limit reads as at the end
+SPAN = 2.0
+
+
+def statistic(mean, limit):
+    """``log10(mean / limit)`` clipped to ``[-SPAN, SPAN]`` (element-wise): how a mean distance
+    compares with the fit limit, 0 at the limit."""
+    mean = np.maximum(np.asarray(mean, dtype=np.float64), 0.0)
+    with np.errstate(divide="ignore"):
+        return np.clip(np.log10(mean / float(limit)), -SPAN, SPAN)
+
+
+def _fingerprint(model) -> str:
+    """A hash of what a model is: a mesh's vertices and faces, else its stored arrays."""
+    h = hashlib.sha256()
+    h.update(f"{model.name}\0{model.kind}\0".encode())
+    if hasattr(model, "vertices") and hasattr(model, "faces"):
+        arrays = {"vertices": model.vertices, "faces": model.faces}
+    else:
+        arrays = model.to_store()
+    for key in sorted(arrays):
+        a = np.ascontiguousarray(arrays[key])
+        h.update(f"{key}\0{a.dtype.str}\0{a.shape}\0".encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
+
+
+def catalogue_key(entries) -> str:
+    """The models' content hash (their order aside): a null model fitted on other models is not used."""
+    h = hashlib.sha256()
+    for fingerprint in sorted(_fingerprint(e.model) for e in entries):
+        h.update(fingerprint.encode())
+    return h.hexdigest()
+
+
+def _solve3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``a^-1 b`` for a 3 x 3 ``a`` by Cramer's rule: the same digits under every BLAS kernel."""
+    def det(m):
+        return (m[0, 0] * (m[1, 1] * m[2, 2] - m[1, 2] * m[2, 1]) - m[0, 1] * (m[1, 0] * m[2, 2] - m[1, 2] * m[2, 0])
+                + m[0, 2] * (m[1, 0] * m[2, 1] - m[1, 1] * m[2, 0]))
+    d = det(a)
+    out = np.empty(3)
+    for i in range(3):
+        m = a.copy()
+        m[:, i] = b
+        out[i] = det(m) / d
+    return out
+
+
+def _logistic(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Coefficients ``(3,)`` of a logistic regression of ``y (n,)`` (0 or 1) on ``[1, x]`` (``x (n, 2)``,
+    standardised), each slope with a unit Gaussian prior: Newton's steps to convergence, in
+    element-wise sums (no BLAS)."""
+    z = np.column_stack([np.ones(len(x)), x])
+    prior = np.array([0.0, 1.0, 1.0])
+    w = np.zeros(3)
+    for _ in range(100):
+        p = 1.0 / (1.0 + np.exp(-np.clip((z * w).sum(axis=1), -30.0, 30.0)))
+        grad = (z * (p - y)[:, None]).sum(axis=0) + prior * w
+        s = p * (1.0 - p)
+        hess = np.array([[float((z[:, i] * z[:, j] * s).sum()) for j in range(3)] for i in range(3)]) + np.diag(prior)
+        step = _solve3(hess, grad)
+        w = w - step
+        if np.abs(step).max() < 1e-12:
+            break
+    return w
+
+
+@dataclasses.dataclass(frozen=True)
+class NullModel:
+    """Calibration touches' statistics (module text).
+
+    Attributes
+    ----------
+    key : str
+        :func:`catalogue_key` of the models it was fitted on.
+    resolving : (n,) float
+        Each calibration touch's resolving power ``r``.
+    known, unknown : (n, 2) float
+        Each touch's ``(x1, x2)`` with the touched model in the database, and left out.
+    seed, touches : int
+        The calibration's seed and touches per model.
+    """
+
+    key: str
+    resolving: np.ndarray
+    known: np.ndarray
+    unknown: np.ndarray
+    seed: int = 0
+    touches: int = 0
+
+    def __len__(self) -> int:
+        return len(self.resolving)
+
+    def ratio(self, x1: float, x2: float, resolving: float) -> float:
+        """The likelihood ratio, known against unknown, of a touch whose best two fits are ``x1`` and
+        ``x2`` (:func:`statistic`) and whose resolving power is ``resolving`` (module text)."""
+        n = len(self)
+        if n == 0:
+            return 1.0
+        k = min(n, max(NEAREST, n // 4))
+        near = np.argsort(np.abs(self.resolving - float(resolving)), kind="stable")[:k]
+
+        def features(s):
+            return np.column_stack([s[:, 0], s[:, 1] - s[:, 0]])
+
+        x = np.vstack([features(self.known[near]), features(self.unknown[near])])
+        centre, scale = x.mean(axis=0), x.std(axis=0) + 1e-6
+        w = _logistic((x - centre) / scale, np.concatenate([np.ones(k), np.zeros(k)]))
+        q = (np.array([x1, x2 - x1], dtype=np.float64) - centre) / scale
+        cap = np.log(k + 1.0)
+        return float(np.exp(np.clip(w[0] + w[1] * q[0] + w[2] * q[1], -cap, cap)))
+
+    def to_json(self) -> dict:
+        return {"format": FORMAT, "version": VERSION, "key": self.key, "seed": int(self.seed),
+                "touches": int(self.touches), "resolving": np.round(self.resolving, 6).tolist(),
+                "known": np.round(self.known, 6).tolist(), "unknown": np.round(self.unknown, 6).tolist()}
+
+    @classmethod
+    def from_json(cls, d, source) -> "NullModel":
+        """From :meth:`to_json`'s dict; an :class:`InputError` naming ``source`` where it is not one."""
+        if not isinstance(d, dict) or d.get("format") != FORMAT:
+            raise InputError("not a tactrec null model of chance fits", source)
+        if d.get("version") != VERSION:
+            raise InputError(f"null model version {d.get('version')!r}, this tactrec reads {VERSION}: "
+                             "run 'tactrec calibrate' again", source)
+        try:
+            r = np.asarray(d["resolving"], dtype=np.float64).reshape(-1)
+            known = np.asarray(d["known"], dtype=np.float64).reshape(len(r), 2)
+            unknown = np.asarray(d["unknown"], dtype=np.float64).reshape(len(r), 2)
+            key, seed, touches = str(d["key"]), int(d["seed"]), int(d["touches"])
+        except (KeyError, TypeError, ValueError) as exc:
+            raise InputError(f"corrupted null model ({exc.__class__.__name__})", source) from None
+        if not (np.isfinite(r).all() and np.isfinite(known).all() and np.isfinite(unknown).all()):
+            raise InputError("corrupted null model (a value is not finite)", source)
+        return cls(key, r, known, unknown, seed, touches)
+
+
+def save(model: NullModel, folder: str | os.PathLike) -> Path:
+    """Write ``model`` into the database ``folder`` (atomically); returns the file."""
+    path = Path(folder) / FILE
+    write_text_atomic(path, json.dumps(model.to_json()) + "\n")
+    return path
+
+
+def load(folder: str | os.PathLike, key: str | None = None) -> NullModel | None:
+    """The null model stored in the database ``folder``, or None where there is none or (``key``
+    given) it was fitted on other models; a damaged file is an :class:`InputError`."""
+    path = Path(folder) / FILE
+    if not path.is_file():
+        return None
+    try:
+        d = json.loads(path.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(f"corrupted null model ({exc.__class__.__name__})", path) from None
+    model = NullModel.from_json(d, path)
+    return model if key is None or model.key == key else None

@@ -1,0 +1,90 @@
+"""Fitting the null model of chance fits on a database's own models (``tactrec calibrate``).
+
+Each model is touched ``touches`` times at seeded random places, alternately
+
+* *small and noisy*: curves of a length drawn log-uniformly over the lower half of ``lengths``
+  (in ``log``), noise drawn log-uniformly over ``noise``, sampling planes 20-45 degrees apart;
+* *larger and clean*: a length over the upper half, no noise, planes 45-75 degrees apart;
+
+61 points a curve.  Each touch is recognised with every model, and again among the others only
+(the touched model left out); the two recognitions' best fits give the calibration's statistics
+(:mod:`tactrec.chance`).  The touches are of the catalogue's own surfaces, so the null model
+learns how alike they are; their kinds span the touches a probe or a fingertip makes, so the
+resolving power of a new touch falls among them.  Everything is drawn from ``seed``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import InputError
+from ..probability import fit_limit
+from ..simulation import simulate_random_touch
+from . import NullModel, catalogue_key, statistic
+
+__all__ = ["calibrate", "fits", "LENGTHS", "NOISE", "TOUCHES", "POINTS"]
+
+#: the range of the calibration touches' curve lengths, data units (the models' usual millimetres)
+LENGTHS = (8.0, 32.0)
+#: the range of the noisy touches' noise sigma, data units
+NOISE = (0.01, 0.08)
+#: touches per model
+TOUCHES = 16
+#: points per calibration curve
+POINTS = 61
+
+
+def fits(recognition, floor: float) -> tuple[float, float, float]:
+    """A recognition's ``(x1, x2, r)``: its best two fits (:func:`~tactrec.chance.statistic`; ``SPAN``
+    where there is none) and its touch's resolving power, ``log10(radius / fit limit)``."""
+    touch = recognition.touch
+    limit = max(fit_limit(touch, floor), touch.fit)
+    errors = sorted(r.error / r.scale for r in recognition.ranking if r.ok)[:2]
+    x = [float(statistic(e, limit)) for e in errors] + [float(statistic(np.inf, 1.0))] * (2 - len(errors))
+    return x[0], x[1], float(np.log10(touch.radius / limit))
+
+
+def _touch(model, rng, small: bool, lengths, noise):
+    lo, hi = np.log(lengths[0]), np.log(lengths[1])
+    mid = 0.5 * (lo + hi)
+    length = float(np.exp(rng.uniform(lo, mid) if small else rng.uniform(mid, hi)))
+    sigma = float(np.exp(rng.uniform(np.log(noise[0]), np.log(noise[1])))) if small else 0.0
+    angle = float(rng.uniform(20.0, 45.0) if small else rng.uniform(45.0, 75.0))
+    return simulate_random_touch(model, rng=rng, points=POINTS, spacing=length / (POINTS - 1), angle=angle,
+                                 noise=sigma, noise_kind="gaussian", outward=not small)
+
+
+def calibrate(recognizer, *, touches: int = TOUCHES, seed: int = 0, lengths=LENGTHS, noise=NOISE,
+              progress=None) -> NullModel:
+    """The null model of ``recognizer``'s models (a :class:`~tactrec.recognition.Recognizer` of at
+    least two), from ``touches`` seeded touches of each (module text).  ``progress``: called with
+    each touch's model name as it is done."""
+    entries = list(recognizer.models)
+    if len(entries) < 2:
+        raise InputError("a null model needs at least two models: one is left out of each touch", "calibrate")
+    if touches < 2:
+        raise InputError(f"calibrate with at least two touches per model, not {touches}", "calibrate")
+    if not (0 < lengths[0] <= lengths[1] and 0 < noise[0] <= noise[1]):
+        raise InputError(f"calibration lengths {lengths} and noise {noise} are not increasing ranges", "calibrate")
+    names = [e.name for e in entries]
+    floor = recognizer.floor
+    r, known, unknown = [], [], []
+    for m, entry in enumerate(entries):
+        others = names[:m] + names[m + 1:]
+        for i in range(int(touches)):
+            rng = np.random.default_rng(np.random.SeedSequence([int(seed), m, i]))
+            try:
+                data = _touch(entry.model, rng, i % 2 == 0, lengths, noise)
+            except ValueError:
+                continue                       # no place of this model takes such a touch
+            whole = fits(recognizer.recognize(data), floor)
+            left = fits(recognizer.recognize(data, among=others), floor)
+            r.append(whole[2])
+            known.append(whole[:2])
+            unknown.append(left[:2])
+            if progress is not None:
+                progress(entry.name)
+    if not r:
+        raise InputError("no model took a calibration touch (are the lengths in the models' units?)", "calibrate")
+    return NullModel(catalogue_key(entries), np.array(r), np.array(known).reshape(-1, 2),
+                     np.array(unknown).reshape(-1, 2), int(seed), int(touches))

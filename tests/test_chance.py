@@ -1,0 +1,147 @@
+"""The null model of chance fits (tactrec.chance): fitted on a database's own models, stored with it,
+and what it does to the probabilities of touches of models in the database and of models left out."""
+
+import json
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tactrec.chance import FILE, catalogue_key, load, save
+from tactrec.chance.fit import calibrate
+from tactrec.cli import main
+from tactrec.database import build_database, build_entries, load_database
+from tactrec.errors import InputError
+from tactrec.recognition import Recognizer
+from tactrec.simulation import simulate_random_touch
+
+MODELS = ["sphere-33", "cylinder-50", "ellipsoid", "cylinder-94"]
+LENGTHS = (6.0, 16.0)
+
+
+@pytest.fixture(scope="module")
+def fitted():
+    db = build_entries(MODELS)
+    with Recognizer(db.entries) as r:
+        model = calibrate(r, touches=6, seed=0, lengths=LENGTHS)
+    return db, model
+
+
+def _touches(db, count, seed):
+    """``count`` seeded touches, alternately noisy and clean, each of a model in turn: (index, data)."""
+    out = []
+    for i in range(count):
+        rng = np.random.default_rng([seed, i])
+        m = i % len(db.entries)
+        noisy = i % 2 == 0
+        data = simulate_random_touch(db.entries[m].model, rng=rng, points=41, spacing=(8.0 if noisy else 14.0) / 40,
+                                     angle=30.0 if noisy else 60.0, noise=0.03 if noisy else 0.0,
+                                     noise_kind="gaussian", outward=not noisy)
+        out.append((m, data))
+    return out
+
+
+def test_left_out_models_come_back_unknown_and_known_ones_right(fitted):
+    """20 seeded touches not used in the fit, half noisy, half clean.  With the null model, a touch of a
+    model left out of the search comes back unknown (its most probable outcome) in at least 16 and
+    is never sure (>= 0.95) of a model; a touch of a model in it names that model as the most
+    probable model in at least 18, and each clean one beats unknown in at least 9 of 10 (a noisy
+    patch of the sphere fits the cylinders too, and then known and left out look alike)."""
+    db, model = fitted
+    names = [e.name for e in db.entries]
+    left_unknown = known_best = clean_right = 0
+    with Recognizer(db.entries, chance=model) as r:
+        for i, (m, data) in enumerate(_touches(db, 20, seed=1234)):
+            whole = r.recognize(data)
+            known_best += whole.best == names[m]
+            clean_right += i % 2 == 1 and whole.best == names[m] and whole.confidence > whole.unknown
+            left = r.recognize(data, among=names[:m] + names[m + 1:])
+            left_unknown += left.unknown > left.confidence
+            assert left.confidence < 0.95, (names[m], left.best, left.confidence)
+    assert left_unknown >= 16
+    assert known_best >= 18
+    assert clean_right >= 9
+
+
+def test_stored_with_the_database_and_read_back(tmp_path, fitted):
+    db, model = fitted
+    build_database(MODELS, tmp_path / "db", quiet=True)
+    save(model, tmp_path / "db")
+    loaded = load_database(tmp_path / "db")
+    assert loaded.chance is not None
+    assert loaded.chance.key == catalogue_key(loaded.entries) == model.key
+    assert np.allclose(loaded.chance.known, model.known, atol=1e-6)
+    with Recognizer(loaded) as r:                       # a database's recognizer takes its null model
+        assert r.chance is loaded.chance
+
+
+def test_a_null_model_of_other_models_is_not_used(tmp_path, fitted):
+    db, model = fitted
+    build_database(MODELS[:3], tmp_path / "db", quiet=True)
+    save(model, tmp_path / "db")
+    lines = []
+    loaded = load_database(tmp_path / "db", warn=lines.append)
+    assert loaded.chance is None
+    assert len(lines) == 1 and FILE in lines[0] and "calibrate" in lines[0]
+
+
+@pytest.mark.parametrize("text", ["{not json", json.dumps({"format": "tactrec-chance", "version": 1}),
+                                  json.dumps({"format": "other"})])
+def test_a_damaged_null_model_is_one_line_and_status_2(tmp_path, capsys, text, fitted):
+    _, model = fitted
+    build_database(MODELS[:2], tmp_path / "db", quiet=True)
+    (tmp_path / "db" / FILE).write_text(text)
+    with pytest.raises(InputError, match=FILE):
+        load(tmp_path / "db")
+    data = tmp_path / "t.json"
+    assert main(["simulate", "sphere-33", "--out", str(data), "--seed", "1", "--spacing", "0.2"]) == 0
+    capsys.readouterr()
+    assert main(["recognize", str(data), "--db", str(tmp_path / "db")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and FILE in err[0]
+
+
+def test_calibrate_command_writes_it_and_recognize_reports_it(tmp_path, capsys):
+    db = tmp_path / "db"
+    assert main(["build", "sphere-33", "cylinder-50", "--out", str(db), "--quiet"]) == 0
+    assert main(["calibrate", "--db", str(db), "--touches", "2", "--lengths", "6,16", "--quiet"]) == 0
+    assert (db / FILE).is_file()
+    data = tmp_path / "t.json"
+    assert main(["simulate", "sphere-33", "--out", str(data), "--seed", "1", "--spacing", "0.2"]) == 0
+    capsys.readouterr()
+    assert main(["recognize", str(data), "--db", str(db), "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert result["calibrated"] is True
+    assert result["best"] == "sphere-33"
+    assert abs(sum(r["probability"] for r in result["ranking"] if "probability" in r) + result["unknown"] - 1) < 1e-9
+
+
+def test_bad_calibration_arguments_are_one_line(tmp_path, capsys):
+    db = tmp_path / "db"
+    assert main(["build", "sphere-33", "--out", str(db), "--quiet"]) == 0
+    assert main(["calibrate", "--db", str(db), "--quiet"]) == 2          # one model: nothing to leave it out among
+    assert "at least two models" in capsys.readouterr().err
+    assert main(["calibrate", "--db", str(tmp_path / "none"), "--quiet"]) == 2
+    assert len(capsys.readouterr().err.strip().splitlines()) == 1
+
+
+def test_twins_that_differ_nowhere_are_never_sure(tmp_path, fitted):
+    """A database holding two copies of one surface under two names: no touch of it, noise-free or
+    noisy, tells them apart, so none of 20 seeded touches is sure (>= 0.95) of either, with its
+    null model and by the fit test alone."""
+    db, _ = fitted
+    twin = tmp_path / "twin.toml"
+    text = (Path(resources.files("tactrec")) / "surfaces" / "builtin" / "sphere-33.toml").read_text()
+    twin.write_text(text.replace('name = "sphere-33"', 'name = "sphere-twin"'))
+    twins = build_entries(["sphere-33", str(twin), "cylinder-50"])
+    with Recognizer(twins.entries) as r:
+        model = calibrate(r, touches=4, seed=0, lengths=LENGTHS)
+    sphere = [(m, data) for m, data in _touches(twins, 60, seed=7) if m == 0][:20]
+    assert len(sphere) == 20
+    for chance in (model, None):
+        with Recognizer(twins.entries, chance=chance) as r:
+            for _, data in sphere:
+                found = r.recognize(data)
+                assert found.best in ("sphere-33", "sphere-twin")
+                assert found.confidence < 0.95, (found.best, found.probabilities)
