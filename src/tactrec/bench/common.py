@@ -147,8 +147,8 @@ CORE_SOURCES = ("io", "estimation.py", "features.py", "linalg.py", "simulation.p
 
 def null_model(entries):
     """The null model of chance fits of the models ``entries`` (:mod:`tactrec.chance`): fitted once, with
-    ``ceil(160 / models)`` touches a model (at least 4) from seed 0, and kept in the cache folder under the
-    models' key and the sources' hash."""
+    ``ceil(160 / models)`` touches a model (at least 4, at most 32) from seed 0, and kept in the cache
+    folder under the models' key and the sources' hash."""
     import math
 
     from ..chance import catalogue_key, load, save
@@ -161,7 +161,7 @@ def null_model(entries):
     found = load(folder, key)
     if found is None:
         with Recognizer(entries, workers=default_workers()) as r:
-            found = calibrate(r, touches=max(4, math.ceil(160 / len(entries))), seed=0)
+            found = calibrate(r, touches=max(4, min(32, math.ceil(160 / len(entries)))), seed=0)
         folder.mkdir(parents=True, exist_ok=True)
         save(found, folder)
     return found
