@@ -61,10 +61,10 @@ def cmd_bench(args) -> int:
     if args.sets is not None:
         from .bench.calibration import SETS as CALIBRATION_SETS
         from .bench.multi_touch import SETS as SESSION_SETS
-        from .bench.open_world import SCAN_SETS as OPEN_SETS
+        from .bench.open_world import EXTRA_SETS, SCAN_SETS
         from .bench.sensor import SCAN_SETS as SENSOR_SETS
 
-        known = {"calibration": CALIBRATION_SETS, "multi-touch": SESSION_SETS, "open-world": OPEN_SETS,
+        known = {"calibration": CALIBRATION_SETS, "multi-touch": SESSION_SETS, "open-world": SCAN_SETS + EXTRA_SETS,
                  "sensor": SENSOR_SETS}.get(args.name)
         if known is None:
             raise InputError("--sets applies to calibration, multi-touch, open-world and sensor only", args.name)

@@ -5,7 +5,9 @@ Leave-one-out over a scan set: every touch of ``fast-vs-paper`` (protocols
 the whole set (a *known* object) and against the set without the touched scan
 (an *unknown* one: the search is run among the others).  Scan sets: the ten
 ``paper-fig11`` scans (``fig11``) and the meshes from other sources
-(:mod:`tactrec.bench.other_scans`, ``other``).  Sessions of left-out objects:
+(:mod:`tactrec.bench.other_scans`, ``other``); on request (``--sets cad``)
+the ten machined parts with sharp edges and flat faces
+(:mod:`tactrec.bench.cad_parts`, ``cad``).  Sessions of left-out objects:
 on each scan, ``ceil(instances / 5)`` sessions of :data:`SESSION_TOUCHES`
 touches of the ``hard`` protocol at random places within reach of the
 earlier ones (``multi-touch``'s ``random``), recognised against the set
@@ -52,9 +54,11 @@ from .calibration import ece_if_calibrated, expected_calibration_error
 from .common import (CORE_SOURCES, instance_rng, null_model, recognizer, run_parallel, saved_record, sources_hash,
                      write_json)
 
-__all__ = ["run", "SCAN_SETS", "PROTOCOLS", "SESSION_TOUCHES", "outcome", "beyond_test"]
+__all__ = ["run", "SCAN_SETS", "EXTRA_SETS", "PROTOCOLS", "SESSION_TOUCHES", "outcome", "beyond_test"]
 
 SCAN_SETS = ("fig11", "other")
+#: sets run only on request
+EXTRA_SETS = ("cad",)
 PROTOCOLS = ("p3", "hard")
 #: touches per session of a left-out object
 SESSION_TOUCHES = 3
@@ -70,9 +74,12 @@ def _code_hash() -> str:
 
 
 def _models(scans: str) -> tuple[str, ...]:
+    from .cad_parts import CAD
     from .other_scans import OTHER
 
-    return tuple(BUILTIN_SETS["paper-fig11"]) if scans == "fig11" else OTHER
+    if scans not in SCAN_SETS + EXTRA_SETS:
+        raise ValueError(f"no scan set {scans!r}; known: {', '.join(SCAN_SETS + EXTRA_SETS)}")
+    return tuple(BUILTIN_SETS["paper-fig11"]) if scans == "fig11" else CAD if scans == "cad" else OTHER
 
 
 def _recognized(rec) -> dict:
