@@ -189,7 +189,12 @@ def load_database(path: str | os.PathLike, *, warn=None) -> Database:
         raise InputError("the database holds no models", db)
     from . import chance
 
-    stored = chance.load(db)
+    try:
+        stored = chance.load(db)
+    except InputError as exc:                 # optional: a damaged one is set aside, not the database
+        if warn is not None:
+            warn(f"{exc}; run 'tactrec calibrate --db {db}' again")
+        stored = None
     if stored is not None and stored.key != chance.catalogue_key(entries):
         if warn is not None:
             warn(f"{db / chance.FILE}: fitted on other models; run 'tactrec calibrate --db {db}' again")

@@ -237,9 +237,10 @@ class Recognizer:
     unknown_prior : float
         The prior probability that a touch came from none of the models, in [0, 1)
         (:data:`~tactrec.probability.UNKNOWN_PRIOR`; 0: a closed world).
-    chance : NullModel or None
-        The models' null model of chance fits (:mod:`tactrec.chance`; a database's, where it holds
-        one fitted on these models); None: ``unknown`` from the fit test alone.
+    chance : NullModel, None or False
+        The models' null model of chance fits (:mod:`tactrec.chance`), fitted on these models for
+        this method; None: a database's own, where it holds one; False: none, ``unknown`` from the
+        fit test alone.
     tips : iterable of float
         Radii of round tips (the models' units) whose offset fields every mesh prepares now, before
         the workers fork (:mod:`tactrec.surfaces.mesh_offset`: read from the stored fields up to
@@ -255,10 +256,13 @@ class Recognizer:
         if not (isinstance(unknown_prior, (int, float)) and 0.0 <= unknown_prior < 1.0):
             raise InputError(f"the prior of unknown must be a number in [0, 1), not {unknown_prior!r}", "unknown_prior")
         self.unknown_prior = float(unknown_prior)
-        self.chance = chance if chance is not None else getattr(models, "chance", None)
         self.method = get_method(method)
         self.config = self.method.configure(**options)
+        stored = getattr(models, "chance", None)          # a database's own
         self.models = list(models)
+        from .chance import chosen
+
+        self.chance = chosen(self.models, chance, self.method.name, stored)
         self._by_name = {entry.name: entry for entry in self.models}
         self.estimation = dict(window=window, degree=degree, curvature_method=curvature_method)
         tips = tuple(float(r) for r in tips)

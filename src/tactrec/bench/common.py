@@ -164,6 +164,7 @@ def null_model(entries):
             found = calibrate(r, touches=max(4, min(32, math.ceil(160 / len(entries)))), seed=0)
         folder.mkdir(parents=True, exist_ok=True)
         save(found, folder)
+        found = load(folder, key)                  # as stored (rounded), whether fitted now or before
     return found
 
 

@@ -34,8 +34,9 @@ default prior of unknown (:data:`tactrec.probability.UNKNOWN_PRIOR`):
 Each set is scored with its null model of chance fits (:mod:`tactrec.chance`,
 fitted on the set's own scans by :func:`tactrec.bench.common.null_model`,
 seeded apart from the touches), and again by the fit test alone
-(:data:`FIT_TEST`).  A left-out scan's sessions are scored with the whole
-set's null model.
+(:data:`FIT_TEST`).  A left-out scan's touches and sessions are scored with
+the set's null model less the calibration touches of that scan
+(:meth:`tactrec.chance.NullModel.without`): it never saw the object.
 """
 
 from __future__ import annotations
@@ -169,10 +170,17 @@ def _percent(values) -> float | None:
     return 100.0 * float(np.mean(values)) if values else None
 
 
+def _without(nulls: dict, scans: str, model: str):
+    """The set's null model without the calibration touches of ``model`` (None without one): a left-out
+    scan is scored by a null model that never saw it."""
+    found = nulls.get(scans)
+    return None if found is None else found.without([model])
+
+
 def _touch_summary(rows: list[dict], prior: float, nulls: dict) -> dict:
     known = [outcome(r["known"]["evidence"], prior, nulls.get(r["scans"])) + (r["model"], r["known"]["recognized"])
              for r in rows]
-    unknown = [outcome(r["unknown"]["evidence"], prior, nulls.get(r["scans"])) for r in rows]
+    unknown = [outcome(r["unknown"]["evidence"], prior, _without(nulls, r["scans"], r["model"])) for r in rows]
     conf = [k[1] for k in known] + [u[1] for u in unknown]
     right = [k[0] == k[3] for k in known] + [u[0] == "unknown" for u in unknown]
     sure = [ok for c, ok in zip(conf, right) if c >= SURE]
@@ -193,7 +201,7 @@ def _touch_summary(rows: list[dict], prior: float, nulls: dict) -> dict:
 def _session_summary(rows: list[dict], prior: float, nulls: dict) -> dict:
     reached, sure_wrong = [], 0
     for r in rows:
-        found = [outcome(s["evidence"], prior, nulls.get(r["scans"])) for s in r["steps"]]
+        found = [outcome(s["evidence"], prior, _without(nulls, r["scans"], r["model"])) for s in r["steps"]]
         reached.append([any(f[2] >= SURE_UNKNOWN for f in found[:n]) for n in range(1, SESSION_TOUCHES + 1)])
         sure_wrong += any(f[0] != "unknown" and f[1] >= SURE for f in found)
     return {"sessions": len(rows),

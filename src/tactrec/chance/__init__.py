@@ -21,10 +21,11 @@ For a new touch, the likelihood ratio of known against unknown (:meth:`NullModel
 logistic regression's odds between the two classes, on the best fit ``x1`` and its lead over the
 second ``x2 - x1``, fitted over the calibration touches nearest the touch in ``r``
 (:data:`NEAREST`; each gives one known and one unknown, so the odds are the likelihood ratio).
-The regression is monotone where the evidence is (a better fit, a larger lead), and smooth where
-the touches are few; each standardised coefficient has a unit Gaussian prior, so that classes the
-touches separate completely do not run to infinity, and the ratio is held within ``1 / (k + 1)``
-and ``k + 1`` over ``k`` touches: no ratio claims more than that many calibration touches can show.
+The regression is smooth where the touches are few and monotone where the evidence is (:data:`SIGNS`:
+a slope of the wrong sign is dropped); each standardised slope has a unit Gaussian prior, so that
+classes the touches separate completely do not run to infinity; a touch beyond every calibration
+touch is read as the farthest of them; and the ratio is held within ``1 / (k + 1)`` and ``k + 1``
+over ``k`` touches: no ratio claims more than that many calibration touches can show.
 A touch more (less) resolving than every calibration touch is read as the most (least)
 resolving of them.  :func:`tactrec.probability.open_world` turns the ratio into ``unknown``'s
 probability and the models'.
@@ -46,7 +47,7 @@ import numpy as np
 from ..errors import InputError
 from ..io.atomic import write_text_atomic
 
-__all__ = ["NullModel", "statistic", "catalogue_key", "load", "save", "FILE", "FORMAT", "VERSION", "NEAREST",
+__all__ = ["NullModel", "SIGNS", "chosen", "statistic", "catalogue_key", "load", "save", "FILE", "FORMAT", "VERSION", "NEAREST",
            "SPAN"]
 
 FORMAT, VERSION = "tactrec-chance", 1
@@ -90,37 +91,46 @@ def catalogue_key(entries) -> str:
     return h.hexdigest()
 
 
-def _solve3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``a^-1 b`` for a 3 x 3 ``a`` by Cramer's rule: the same digits under every BLAS kernel."""
-    def det(m):
-        return (m[0, 0] * (m[1, 1] * m[2, 2] - m[1, 2] * m[2, 1]) - m[0, 1] * (m[1, 0] * m[2, 2] - m[1, 2] * m[2, 0])
-                + m[0, 2] * (m[1, 0] * m[2, 1] - m[1, 1] * m[2, 0]))
-    d = det(a)
-    out = np.empty(3)
-    for i in range(3):
-        m = a.copy()
-        m[:, i] = b
-        out[i] = det(m) / d
-    return out
+def _solve(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``a^-1 b`` for a small symmetric positive definite ``a``, by Gaussian elimination in plain
+    arithmetic: the same digits under every BLAS kernel."""
+    a = a.astype(np.float64).copy()
+    b = b.astype(np.float64).copy()
+    n = len(b)
+    for i in range(n):
+        for j in range(i + 1, n):
+            f = a[j, i] / a[i, i]
+            a[j, i:] = a[j, i:] - f * a[i, i:]
+            b[j] = b[j] - f * b[i]
+    x = np.zeros(n)
+    for i in range(n - 1, -1, -1):
+        x[i] = (b[i] - float((a[i, i + 1:] * x[i + 1:]).sum())) / a[i, i]
+    return x
 
 
 def _logistic(x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """Coefficients ``(3,)`` of a logistic regression of ``y (n,)`` (0 or 1) on ``[1, x]`` (``x (n, 2)``,
+    """Coefficients ``(1 + d,)`` of a logistic regression of ``y (n,)`` (0 or 1) on ``[1, x]`` (``x (n, d)``,
     standardised), each slope with a unit Gaussian prior: Newton's steps to convergence, in
     element-wise sums (no BLAS)."""
     z = np.column_stack([np.ones(len(x)), x])
-    prior = np.array([0.0, 1.0, 1.0])
-    w = np.zeros(3)
+    d = z.shape[1]
+    prior = np.array([0.0] + [1.0] * (d - 1))
+    w = np.zeros(d)
     for _ in range(100):
         p = 1.0 / (1.0 + np.exp(-np.clip((z * w).sum(axis=1), -30.0, 30.0)))
         grad = (z * (p - y)[:, None]).sum(axis=0) + prior * w
         s = p * (1.0 - p)
-        hess = np.array([[float((z[:, i] * z[:, j] * s).sum()) for j in range(3)] for i in range(3)]) + np.diag(prior)
-        step = _solve3(hess, grad)
+        hess = np.array([[float((z[:, i] * z[:, j] * s).sum()) for j in range(d)] for i in range(d)]) + np.diag(prior)
+        step = _solve(hess, grad)
         w = w - step
         if np.abs(step).max() < 1e-12:
             break
     return w
+
+
+#: the sign each slope must have: a worse best fit is never more evidence for a model, a larger
+#: lead over the second never less
+SIGNS = (-1.0, 1.0)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -135,6 +145,10 @@ class NullModel:
         Each calibration touch's resolving power ``r``.
     known, unknown : (n, 2) float
         Each touch's ``(x1, x2)`` with the touched model in the database, and left out.
+    touched : tuple of str
+        Each touch's model (:meth:`without` leaves a model's touches out).
+    method : str
+        The method whose fits were calibrated (a recognizer of another does not use it).
     seed, touches : int
         The calibration's seed and touches per model.
     """
@@ -143,17 +157,28 @@ class NullModel:
     resolving: np.ndarray
     known: np.ndarray
     unknown: np.ndarray
+    touched: tuple = ()
+    method: str = "fast"
     seed: int = 0
     touches: int = 0
 
     def __len__(self) -> int:
         return len(self.resolving)
 
+    def without(self, names) -> "NullModel":
+        """The null model of the calibration touches of models other than ``names``: a database that
+        leaves those models out is scored without having seen them."""
+        keep = np.array([t not in set(names) for t in self.touched], dtype=bool)
+        return dataclasses.replace(self, resolving=self.resolving[keep], known=self.known[keep],
+                                   unknown=self.unknown[keep], touched=tuple(np.array(self.touched)[keep].tolist()),
+                                   key=f"{self.key} without {','.join(sorted(names))}")
+
     def ratio(self, x1: float, x2: float, resolving: float) -> float:
         """The likelihood ratio, known against unknown, of a touch whose best two fits are ``x1`` and
-        ``x2`` (:func:`statistic`) and whose resolving power is ``resolving`` (module text)."""
+        ``x2`` (:func:`statistic`) and whose resolving power is ``resolving`` (module text); 1 (no
+        evidence either way) for statistics that are not finite."""
         n = len(self)
-        if n == 0:
+        if n == 0 or not np.isfinite([x1, x2, resolving]).all():
             return 1.0
         k = min(n, max(NEAREST, n // 4))
         near = np.argsort(np.abs(self.resolving - float(resolving)), kind="stable")[:k]
@@ -162,16 +187,27 @@ class NullModel:
             return np.column_stack([s[:, 0], s[:, 1] - s[:, 0]])
 
         x = np.vstack([features(self.known[near]), features(self.unknown[near])])
-        centre, scale = x.mean(axis=0), x.std(axis=0) + 1e-6
-        w = _logistic((x - centre) / scale, np.concatenate([np.ones(k), np.zeros(k)]))
-        q = (np.array([x1, x2 - x1], dtype=np.float64) - centre) / scale
+        y = np.concatenate([np.ones(k), np.zeros(k)])
+        # a touch beyond every calibration touch is read as the farthest of them
+        q = np.clip(np.array([x1, x2 - x1], dtype=np.float64), x.min(axis=0), x.max(axis=0))
+        use = [0, 1]
+        while True:                     # a slope of the wrong sign is dropped and the rest fitted again
+            centre = x[:, use].mean(axis=0)
+            scale = x[:, use].std(axis=0) + 1e-6
+            w = _logistic((x[:, use] - centre) / scale, y)
+            wrong = [f for f, c in zip(use, w[1:]) if c * SIGNS[f] < 0.0]
+            if not wrong:
+                break
+            use = [f for f in use if f not in wrong]
+        logit = w[0] + float((w[1:] * (q[use] - centre) / scale).sum())
         cap = np.log(k + 1.0)
-        return float(np.exp(np.clip(w[0] + w[1] * q[0] + w[2] * q[1], -cap, cap)))
+        return float(np.exp(np.clip(logit, -cap, cap)))
 
     def to_json(self) -> dict:
-        return {"format": FORMAT, "version": VERSION, "key": self.key, "seed": int(self.seed),
+        return {"format": FORMAT, "version": VERSION, "key": self.key, "method": self.method, "seed": int(self.seed),
                 "touches": int(self.touches), "resolving": np.round(self.resolving, 6).tolist(),
-                "known": np.round(self.known, 6).tolist(), "unknown": np.round(self.unknown, 6).tolist()}
+                "known": np.round(self.known, 6).tolist(), "unknown": np.round(self.unknown, 6).tolist(),
+                "touched": list(self.touched)}
 
     @classmethod
     def from_json(cls, d, source) -> "NullModel":
@@ -185,12 +221,15 @@ class NullModel:
             r = np.asarray(d["resolving"], dtype=np.float64).reshape(-1)
             known = np.asarray(d["known"], dtype=np.float64).reshape(len(r), 2)
             unknown = np.asarray(d["unknown"], dtype=np.float64).reshape(len(r), 2)
-            key, seed, touches = str(d["key"]), int(d["seed"]), int(d["touches"])
-        except (KeyError, TypeError, ValueError) as exc:
+            touched = tuple(str(t) for t in d["touched"])
+            key, method, seed, touches = str(d["key"]), str(d["method"]), int(d["seed"]), int(d["touches"])
+        except (KeyError, TypeError, ValueError, OverflowError) as exc:
             raise InputError(f"corrupted null model ({exc.__class__.__name__})", source) from None
+        if len(touched) != len(r):
+            raise InputError("corrupted null model (a touch without its model)", source)
         if not (np.isfinite(r).all() and np.isfinite(known).all() and np.isfinite(unknown).all()):
             raise InputError("corrupted null model (a value is not finite)", source)
-        return cls(key, r, known, unknown, seed, touches)
+        return cls(key, r, known, unknown, touched, method, seed, touches)
 
 
 def save(model: NullModel, folder: str | os.PathLike) -> Path:
@@ -208,7 +247,22 @@ def load(folder: str | os.PathLike, key: str | None = None) -> NullModel | None:
         return None
     try:
         d = json.loads(path.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+    except (OSError, ValueError) as exc:                     # unreadable, not text, not JSON
         raise InputError(f"corrupted null model ({exc.__class__.__name__})", path) from None
     model = NullModel.from_json(d, path)
     return model if key is None or model.key == key else None
+
+
+def chosen(entries, chance, method: str, stored: NullModel | None = None) -> NullModel | None:
+    """The null model a recognizer of ``entries`` by ``method`` uses: ``chance`` (False: none), else
+    (None) ``stored``, the database's own, where it was fitted for this method; one given that was
+    fitted on other models or for another method is an :class:`InputError`."""
+    if chance is False:
+        return None
+    if chance is None:
+        return stored if stored is not None and stored.method == method else None
+    if chance.key != catalogue_key(entries):
+        raise InputError("the null model of chance fits was fitted on other models", "chance")
+    if chance.method != method:
+        raise InputError(f"the null model of chance fits is {chance.method!r}'s, not {method!r}'s", "chance")
+    return chance

@@ -20,7 +20,7 @@ import numpy as np
 from ..errors import InputError
 from ..probability import fit_limit
 from ..simulation import simulate_random_touch
-from . import NullModel, catalogue_key, statistic
+from . import SPAN, NullModel, catalogue_key
 
 __all__ = ["calibrate", "fits", "LENGTHS", "NOISE", "TOUCHES", "POINTS"]
 
@@ -35,13 +35,13 @@ POINTS = 61
 
 
 def fits(recognition, floor: float) -> tuple[float, float, float]:
-    """A recognition's ``(x1, x2, r)``: its best two fits (:func:`~tactrec.chance.statistic`; ``SPAN``
-    where there is none) and its touch's resolving power, ``log10(radius / fit limit)``."""
+    """A recognition's ``(x1, x2, r)`` as :meth:`tactrec.probability.Evidence.chance_statistics` reads
+    them (``SPAN`` for a fit it has not), the one path calibration and recognition share."""
     touch = recognition.touch
     limit = max(fit_limit(touch, floor), touch.fit)
-    errors = sorted(r.error / r.scale for r in recognition.ranking if r.ok)[:2]
-    x = [float(statistic(e, limit)) for e in errors] + [float(statistic(np.inf, 1.0))] * (2 - len(errors))
-    return x[0], x[1], float(np.log10(touch.radius / limit))
+    if recognition.evidence is not None and len(recognition.evidence.models):
+        return recognition.evidence.chance_statistics()
+    return SPAN, SPAN, float(np.log10(touch.radius / limit))
 
 
 def _touch(model, rng, small: bool, lengths, noise):
@@ -68,7 +68,7 @@ def calibrate(recognizer, *, touches: int = TOUCHES, seed: int = 0, lengths=LENG
         raise InputError(f"calibration lengths {lengths} and noise {noise} are not increasing ranges", "calibrate")
     names = [e.name for e in entries]
     floor = recognizer.floor
-    r, known, unknown = [], [], []
+    r, known, unknown, touched = [], [], [], []
     for m, entry in enumerate(entries):
         others = names[:m] + names[m + 1:]
         for i in range(int(touches)):
@@ -80,6 +80,7 @@ def calibrate(recognizer, *, touches: int = TOUCHES, seed: int = 0, lengths=LENG
             whole = fits(recognizer.recognize(data), floor)
             left = fits(recognizer.recognize(data, among=others), floor)
             r.append(whole[2])
+            touched.append(entry.name)
             known.append(whole[:2])
             unknown.append(left[:2])
             if progress is not None:
@@ -87,4 +88,4 @@ def calibrate(recognizer, *, touches: int = TOUCHES, seed: int = 0, lengths=LENG
     if not r:
         raise InputError("no model took a calibration touch (are the lengths in the models' units?)", "calibrate")
     return NullModel(catalogue_key(entries), np.array(r), np.array(known).reshape(-1, 2),
-                     np.array(unknown).reshape(-1, 2), int(seed), int(touches))
+                     np.array(unknown).reshape(-1, 2), tuple(touched), recognizer.method.name, int(seed), int(touches))

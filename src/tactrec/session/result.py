@@ -150,7 +150,8 @@ class SessionResult:
         out = {"best": self.best, "ranking": ranking}
         if g is not None:                                            # the latest touch, world frame
             out.update(contact=g.contact.tolist(), normal=g.normal.tolist(), curvatures=[g.k1, g.k2])
-        out.update(confidence=self.confidence, unknown=self.unknown, ambiguous=self.ambiguous, touches=self.touches,
+        out.update(confidence=self.confidence, unknown=self.unknown, calibrated=self.chance is not None,
+                   ambiguous=self.ambiguous, touches=self.touches,
                    slipped=list(self.slipped), missed=self.missed,
                    outliers=[int(n) for n in self.outliers], seconds=round(self.seconds, 4))
         return out
