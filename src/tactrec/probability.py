@@ -282,15 +282,17 @@ class Evidence:
 
     def chance_statistics(self) -> tuple[float, float, float]:
         """``(x1, x2, r)`` for the null model of chance fits (:mod:`tactrec.chance`): the best two
-        models' fits, each its mean distance over every point against the points-weighted mean of
-        the touches' limits (:func:`tactrec.chance.statistic`), and the touches' median resolving
-        power ``log10(radius / limit)``."""
+        models' fits, each its mean distance over every point (read as :attr:`resolution` where
+        closer) against the points-weighted mean of the touches' limits
+        (:func:`tactrec.chance.statistic`), and the touches' median resolving power
+        ``log10(radius / limit)``."""
         from .chance import SPAN, statistic
 
         points = self.touch_points()
         total = max(int(points.sum()), 1)
         limit = float((np.asarray(self.limits) * points).sum() / total)          # element-wise: no BLAS
-        means = np.sort(self.distances.sum(axis=1) / total)[:2]
+        # a fit closer than the resolution is read as at it (module text): all such fits are one evidence
+        means = np.maximum(np.sort(self.distances.sum(axis=1) / total)[:2], self.resolution)
         x = [float(statistic(v, limit)) for v in means] + [SPAN] * (2 - len(means))
         r = float(np.median(np.log10(np.asarray(self.radii, dtype=np.float64) / np.asarray(self.limits))))
         return x[0], x[1], r

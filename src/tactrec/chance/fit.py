@@ -4,7 +4,9 @@ Each model is touched ``touches`` times at seeded random places, alternately
 
 * *small and noisy*: curves of a length drawn log-uniformly over the lower half of ``lengths``
   (in ``log``), noise drawn log-uniformly over ``noise``, sampling planes 20-45 degrees apart;
-* *larger and clean*: a length over the upper half, no noise, planes 45-75 degrees apart;
+* *larger and clean*: a length over the upper half, no noise, planes 45-75 degrees apart, every
+  other one at a random vertex of a mesh (where a machined part's edges and corners are: the
+  places its touches tell least well from another part's);
 
 61 points a curve.  Each touch is recognised with every model, and again among the others only
 (the touched model left out); the two recognitions' best fits give the calibration's statistics
@@ -19,7 +21,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..probability import fit_limit
-from ..simulation import simulate_random_touch
+from ..simulation import simulate_random_touch, simulate_touch
 from . import SPAN, NullModel, catalogue_key
 
 __all__ = ["calibrate", "fits", "LENGTHS", "NOISE", "TOUCHES", "POINTS"]
@@ -44,14 +46,26 @@ def fits(recognition, floor: float) -> tuple[float, float, float]:
     return SPAN, SPAN, float(np.log10(touch.radius / limit))
 
 
-def _touch(model, rng, small: bool, lengths, noise):
+def _touch(model, rng, kind: int, lengths, noise):
+    """Calibration touch of ``kind`` (0: small and noisy; 1: clean at a random place; 2: clean at a
+    random vertex of a mesh, where a machined part's edges and corners are)."""
+    small = kind == 0
     lo, hi = np.log(lengths[0]), np.log(lengths[1])
     mid = 0.5 * (lo + hi)
     length = float(np.exp(rng.uniform(lo, mid) if small else rng.uniform(mid, hi)))
     sigma = float(np.exp(rng.uniform(np.log(noise[0]), np.log(noise[1])))) if small else 0.0
     angle = float(rng.uniform(20.0, 45.0) if small else rng.uniform(45.0, 75.0))
-    return simulate_random_touch(model, rng=rng, points=POINTS, spacing=length / (POINTS - 1), angle=angle,
-                                 noise=sigma, noise_kind="gaussian", outward=not small)
+    options = dict(points=POINTS, spacing=length / (POINTS - 1), angle=angle, noise=sigma, noise_kind="gaussian",
+                   outward=not small)
+    if kind == 2 and hasattr(model, "vertices"):
+        for _ in range(50):
+            try:
+                return simulate_touch(model, [int(rng.integers(len(model.vertices)))], rng=rng, **options)
+            except InputError:
+                raise
+            except ValueError:
+                continue
+    return simulate_random_touch(model, rng=rng, **options)
 
 
 def calibrate(recognizer, *, touches: int = TOUCHES, seed: int = 0, lengths=LENGTHS, noise=NOISE,
@@ -74,7 +88,7 @@ def calibrate(recognizer, *, touches: int = TOUCHES, seed: int = 0, lengths=LENG
         for i in range(int(touches)):
             rng = np.random.default_rng(np.random.SeedSequence([int(seed), m, i]))
             try:
-                data = _touch(entry.model, rng, i % 2 == 0, lengths, noise)
+                data = _touch(entry.model, rng, 0 if i % 2 == 0 else 1 + (i // 2) % 2, lengths, noise)
             except ValueError:
                 continue                       # no place of this model takes such a touch
             whole = fits(recognizer.recognize(data), floor)
