@@ -39,7 +39,7 @@ def add_calibrate_parser(sub, *, count, methods, default_method):
 def cmd_calibrate(args) -> int:
     from tqdm import tqdm
 
-    from .chance import FILE, save
+    from .chance import save
     from .chance.fit import LENGTHS, NOISE, TOUCHES, calibrate
     from .database import load_database
     from .recognition import Recognizer

@@ -141,8 +141,8 @@ def _default(obj):
 
 #: the sources every recognition depends on (files, or folders of ``.py`` files, relative to the package)
 CORE_SOURCES = ("io", "estimation.py", "features.py", "linalg.py", "simulation.py", "tables.py", "recognition.py",
-                "runner.py", "tip.py", "outliers.py", "probability.py", "bootstrap.py", "chance", "surfaces", "registration", "methods",
-                "engine")
+                "runner.py", "tip.py", "outliers.py", "probability.py", "bootstrap.py", "chance", "surfaces", "registration",
+                "methods", "engine")
 
 
 def null_model(entries):

@@ -13,7 +13,9 @@ touch is of an object the database does not hold).
 Each recognition gives two statistics, the best model's fit ``x1`` and the second best's ``x2``
 (:func:`statistic`: ``log10`` of the mean distance over the fit limit,
 :func:`tactrec.probability.fit_limit`, clipped to ``[-2, 2]``; ``x2 = 2`` without a second
-model), and each touch its resolving power ``r = log10(radius / fit limit)``.  A chance fit is
+model; a mean distance below the touch's resolution, :func:`tactrec.probability.resolution`, is
+read as at it, so that all fits closer than the data can tell are one evidence), and each touch
+its resolving power ``r = log10(radius / fit limit)``.  A chance fit is
 seldom alone: where the touched model fits, the others usually fit much worse (``x2 - x1``
 large); where an unrelated model fits by chance, others usually fit nearly as well.
 
@@ -26,7 +28,7 @@ a slope of the wrong sign is dropped); each standardised slope has a unit Gaussi
 classes the touches separate completely do not run to infinity; a touch beyond every calibration
 touch is read as the farthest of them; and the ratio is held within ``1 / (k + 1)`` and ``k + 1``
 over ``k`` touches: no ratio claims more than that many calibration touches can show.
-A touch more (less) resolving than every calibration touch is read as the most (least)
+A touch more (less) resolving than every calibration touch is read with the most (least)
 resolving of them.  :func:`tactrec.probability.open_world` turns the ratio into ``unknown``'s
 probability and the models'.
 
@@ -47,8 +49,8 @@ import numpy as np
 from ..errors import InputError
 from ..io.atomic import write_text_atomic
 
-__all__ = ["NullModel", "SIGNS", "chosen", "statistic", "catalogue_key", "load", "save", "FILE", "FORMAT", "VERSION", "NEAREST",
-           "SPAN"]
+__all__ = ["NullModel", "SIGNS", "chosen", "statistic", "catalogue_key", "load", "save", "FILE", "FORMAT", "VERSION",
+           "NEAREST", "SPAN"]
 
 FORMAT, VERSION = "tactrec-chance", 1
 #: the null model's file in a database folder
