@@ -276,9 +276,8 @@ class Evidence:
             spread = fit_spread(limit, m)
             z[:, j] = (mean - limit) / spread if spread > 0 else np.where(mean > limit, np.inf, -np.inf)
         worst = z.max(axis=1)
-        if lines and self.misses is not None and np.size(self.misses):
-            worst = np.maximum(worst, np.asarray(self.misses, dtype=np.float64).max(axis=1))
-        return worst
+        cut = self.line_excess() if lines else None
+        return worst if cut is None else np.maximum(worst, cut)
 
     def chance_statistics(self) -> tuple[float, float, float]:
         """``(x1, x2, r)`` for the null model of chance fits (:mod:`tactrec.chance`): the best two

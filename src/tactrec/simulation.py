@@ -126,12 +126,15 @@ def simulate_touch(model: SurfaceModel, site, *, points: int = 61, spacing: floa
 
 
 def simulate_random_touch(model: SurfaceModel, *, rng=None, attempts: int = 200, margin: float = 0.0,
-                          **options) -> TactileData:
-    """A touch at a random site whose curves all stay on the surface."""
+                          vertices: bool = False, **options) -> TactileData:
+    """A touch at a random site whose curves all stay on the surface (``vertices``: at a random vertex
+    of a mesh, where a machined part's edges and corners are)."""
     rng = np.random.default_rng(rng)
     last = None
     for _ in range(attempts):
-        if hasattr(model, "random_sites") and margin:
+        if vertices and hasattr(model, "vertices"):
+            site = [int(rng.integers(len(model.vertices)))]
+        elif hasattr(model, "random_sites") and margin:
             site = model.random_sites(1, rng=rng, margin=margin)[0]
         else:
             site = model.random_sites(1, rng=rng)[0]

@@ -21,7 +21,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..probability import fit_limit
-from ..simulation import simulate_random_touch, simulate_touch
+from ..simulation import simulate_random_touch
 from . import SPAN, NullModel, catalogue_key
 
 __all__ = ["calibrate", "fits", "LENGTHS", "NOISE", "TOUCHES", "POINTS"]
@@ -58,13 +58,12 @@ def _touch(model, rng, kind: int, lengths, noise):
     options = dict(points=POINTS, spacing=length / (POINTS - 1), angle=angle, noise=sigma, noise_kind="gaussian",
                    outward=not small)
     if kind == 2 and hasattr(model, "vertices"):
-        for _ in range(50):
-            try:
-                return simulate_touch(model, [int(rng.integers(len(model.vertices)))], rng=rng, **options)
-            except InputError:
-                raise
-            except ValueError:
-                continue
+        try:
+            return simulate_random_touch(model, rng=rng, attempts=50, vertices=True, **options)
+        except InputError:
+            raise
+        except ValueError:
+            pass                               # no vertex takes it: a random place does
     return simulate_random_touch(model, rng=rng, **options)
 
 
