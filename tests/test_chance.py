@@ -74,6 +74,10 @@ def test_stored_with_the_database_and_read_back(tmp_path, fitted):
     assert loaded.chance is not None
     assert loaded.chance.key == catalogue_key(loaded.entries) == model.key
     assert np.allclose(loaded.chance.known, model.known, atol=1e-6)
+    # the prior chosen when it was fitted is read back, not chosen again on the rounded statistics
+    assert loaded.chance.penalty == model.penalty
+    assert all(np.isclose(loaded.chance.ratio(x, x + 0.5, r), model.ratio(x, x + 0.5, r), rtol=1e-4)
+               for x in (-1.0, 0.0, 1.0) for r in model.resolving[::7])
     with Recognizer(loaded) as r:                       # a database's recognizer takes its null model
         assert r.chance is loaded.chance
 
@@ -91,7 +95,9 @@ def test_a_null_model_of_other_models_is_not_used(tmp_path, fitted):
 @pytest.mark.parametrize("text", ["{not json", json.dumps({"format": "tactrec-chance", "version": 1}),
                                   json.dumps({"format": "other"}), '{"format": "tactrec-chance", "version": 1, '
                                   '"key": "k", "method": "fast", "seed": 1e400, "touches": 2, "resolving": [], '
-                                  '"known": [], "unknown": [], "touched": []}'])
+                                  '"known": [], "unknown": [], "touched": []}', '{"format": "tactrec-chance", '
+                                  '"version": 1, "key": "k", "method": "fast", "seed": 0, "touches": 2, "resolving": '
+                                  '[1.0], "known": [[0, 1]], "unknown": [[1, 1]], "touched": ["a"], "penalty": 5}'])
 def test_a_damaged_null_model_is_named_set_aside_and_calibrated_again(tmp_path, capsys, text):
     """Read directly, a damaged null model is an error naming its file; a database holding one says so
     in one warning line and scores by the fit test alone; ``tactrec calibrate`` writes it again."""

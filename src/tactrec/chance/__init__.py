@@ -24,8 +24,10 @@ logistic regression's odds between the two classes, on the best fit ``x1`` and i
 second ``x2 - x1``, fitted over the calibration touches nearest the touch in ``r``
 (:data:`NEAREST`; each gives one known and one unknown, so the odds are the likelihood ratio).
 The regression is smooth where the touches are few and monotone where the evidence is (:data:`SIGNS`:
-a slope of the wrong sign is dropped); each standardised slope has a unit Gaussian prior, so that
-classes the touches separate completely do not run to infinity; a touch beyond every calibration
+a slope of the wrong sign is dropped); each standardised slope has a Gaussian prior, so that
+classes the touches separate completely do not run to infinity, whose precision the calibration
+touches choose themselves (:attr:`NullModel.penalty`: of :data:`PENALTIES`, the one under which
+each touch, left out, is predicted best by the others); a touch beyond every calibration
 touch is read as the farthest of them; and the ratio is held within ``1 / (k + 1)`` and ``k + 1``
 over ``k`` touches: no ratio claims more than that many calibration touches can show.
 A touch more (less) resolving than every calibration touch is read with the most (least)
@@ -39,6 +41,7 @@ The model is stored with the database (:data:`FILE`, plain JSON, keyed by the mo
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import json
 import os
@@ -50,7 +53,7 @@ from ..errors import InputError
 from ..io.atomic import write_text_atomic
 
 __all__ = ["NullModel", "SIGNS", "chosen", "statistic", "catalogue_key", "load", "save", "FILE", "FORMAT", "VERSION",
-           "NEAREST", "SPAN"]
+           "NEAREST", "PENALTIES", "SPAN"]
 
 FORMAT, VERSION = "tactrec-chance", 1
 #: the null model's file in a database folder
@@ -58,6 +61,9 @@ FILE = "chance.json"
 #: a touch's ratio is fitted over at least this many calibration touches, the nearest in resolving
 #: power, or a quarter of them where that is more
 NEAREST = 20
+#: the slopes' prior precisions (on standardised features) cross-validation chooses among: from a unit
+#: prior to one a hundred times wider
+PENALTIES = (1.0, 0.3, 0.1, 0.03, 0.01)
 #: the statistics' range: a fit this many decades better or worse than its limit reads as at the end
 SPAN = 2.0
 
@@ -110,13 +116,13 @@ def _solve(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return x
 
 
-def _logistic(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+def _logistic(x: np.ndarray, y: np.ndarray, penalty: float) -> np.ndarray:
     """Coefficients ``(1 + d,)`` of a logistic regression of ``y (n,)`` (0 or 1) on ``[1, x]`` (``x (n, d)``,
-    standardised), each slope with a unit Gaussian prior: Newton's steps to convergence, in
-    element-wise sums (no BLAS)."""
+    standardised), each slope with a Gaussian prior of precision ``penalty``: Newton's steps to
+    convergence, in element-wise sums (no BLAS)."""
     z = np.column_stack([np.ones(len(x)), x])
     d = z.shape[1]
-    prior = np.array([0.0] + [1.0] * (d - 1))
+    prior = np.array([0.0] + [float(penalty)] * (d - 1))
     w = np.zeros(d)
     for _ in range(100):
         p = 1.0 / (1.0 + np.exp(-np.clip((z * w).sum(axis=1), -30.0, 30.0)))
@@ -133,6 +139,37 @@ def _logistic(x: np.ndarray, y: np.ndarray) -> np.ndarray:
 #: the sign each slope must have: a worse best fit is never more evidence for a model, a larger
 #: lead over the second never less
 SIGNS = (-1.0, 1.0)
+
+
+def _ratio(resolving, known, unknown, query, penalty: float) -> float:
+    """:meth:`NullModel.ratio` of ``query = (x1, x2, r)`` over the calibration touches ``resolving (n,)``,
+    ``known, unknown (n, 2)``, slopes with a prior of precision ``penalty``; 1 without touches."""
+    n = len(resolving)
+    if n == 0:
+        return 1.0
+    x1, x2, r = (float(v) for v in query)
+    k = min(n, max(NEAREST, n // 4))
+    near = np.argsort(np.abs(resolving - r), kind="stable")[:k]
+
+    def features(s):
+        return np.column_stack([s[:, 0], s[:, 1] - s[:, 0]])
+
+    x = np.vstack([features(known[near]), features(unknown[near])])
+    y = np.concatenate([np.ones(k), np.zeros(k)])
+    # a touch beyond every calibration touch is read as the farthest of them
+    q = np.clip(np.array([x1, x2 - x1], dtype=np.float64), x.min(axis=0), x.max(axis=0))
+    use = [0, 1]
+    while True:                     # a slope of the wrong sign is dropped and the rest fitted again
+        centre = x[:, use].mean(axis=0)
+        scale = x[:, use].std(axis=0) + 1e-6
+        w = _logistic((x[:, use] - centre) / scale, y, penalty)
+        wrong = [f for f, c in zip(use, w[1:]) if c * SIGNS[f] < 0.0]
+        if not wrong:
+            break
+        use = [f for f in use if f not in wrong]
+    logit = w[0] + float((w[1:] * (q[use] - centre) / scale).sum())
+    cap = np.log(k + 1.0)
+    return float(np.exp(np.clip(logit, -cap, cap)))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -153,6 +190,8 @@ class NullModel:
         The method whose fits were calibrated (a recognizer of another does not use it).
     seed, touches : int
         The calibration's seed and touches per model.
+    fitted_penalty : float or None
+        The prior's precision as chosen when it was fitted (:attr:`penalty`; None: chosen when read).
     """
 
     key: str
@@ -163,53 +202,63 @@ class NullModel:
     method: str = "fast"
     seed: int = 0
     touches: int = 0
+    fitted_penalty: float | None = None
 
     def __len__(self) -> int:
         return len(self.resolving)
 
     def without(self, names) -> "NullModel":
         """The null model of the calibration touches of models other than ``names``: a database that
-        leaves those models out is scored without having seen them."""
-        keep = np.array([t not in set(names) for t in self.touched], dtype=bool)
-        return dataclasses.replace(self, resolving=self.resolving[keep], known=self.known[keep],
-                                   unknown=self.unknown[keep], touched=tuple(np.array(self.touched)[keep].tolist()),
-                                   key=f"{self.key} without {','.join(sorted(names))}")
+        leaves those models out is scored without having seen them (made once per ``names``)."""
+        leave = tuple(sorted(set(names)))
+        if leave not in self._left:
+            keep = np.array([t not in leave for t in self.touched], dtype=bool)
+            self._left[leave] = dataclasses.replace(
+                self, resolving=self.resolving[keep], known=self.known[keep], unknown=self.unknown[keep],
+                touched=tuple(np.array(self.touched)[keep].tolist()), key=f"{self.key} without {','.join(leave)}",
+                fitted_penalty=None)
+        return self._left[leave]
+
+    @functools.cached_property
+    def _left(self) -> dict:
+        """:meth:`without`'s models, by the names left out (each chooses its prior once)."""
+        return {}
 
     def ratio(self, x1: float, x2: float, resolving: float) -> float:
         """The likelihood ratio, known against unknown, of a touch whose best two fits are ``x1`` and
         ``x2`` (:func:`statistic`) and whose resolving power is ``resolving`` (module text); 1 (no
         evidence either way) for statistics that are not finite."""
-        n = len(self)
-        if n == 0 or not np.isfinite([x1, x2, resolving]).all():
+        if not np.isfinite([x1, x2, resolving]).all():
             return 1.0
-        k = min(n, max(NEAREST, n // 4))
-        near = np.argsort(np.abs(self.resolving - float(resolving)), kind="stable")[:k]
+        return _ratio(self.resolving, self.known, self.unknown, (x1, x2, resolving), self.penalty)
 
-        def features(s):
-            return np.column_stack([s[:, 0], s[:, 1] - s[:, 0]])
-
-        x = np.vstack([features(self.known[near]), features(self.unknown[near])])
-        y = np.concatenate([np.ones(k), np.zeros(k)])
-        # a touch beyond every calibration touch is read as the farthest of them
-        q = np.clip(np.array([x1, x2 - x1], dtype=np.float64), x.min(axis=0), x.max(axis=0))
-        use = [0, 1]
-        while True:                     # a slope of the wrong sign is dropped and the rest fitted again
-            centre = x[:, use].mean(axis=0)
-            scale = x[:, use].std(axis=0) + 1e-6
-            w = _logistic((x[:, use] - centre) / scale, y)
-            wrong = [f for f, c in zip(use, w[1:]) if c * SIGNS[f] < 0.0]
-            if not wrong:
-                break
-            use = [f for f in use if f not in wrong]
-        logit = w[0] + float((w[1:] * (q[use] - centre) / scale).sum())
-        cap = np.log(k + 1.0)
-        return float(np.exp(np.clip(logit, -cap, cap)))
+    @functools.cached_property
+    def penalty(self) -> float:
+        """The slopes' prior precision: of :data:`PENALTIES`, the one whose ratios predict each
+        calibration touch best (the mean log-likelihood of its known and unknown recognitions) from
+        the other touches alone; the first (the most cautious) of equals."""
+        if self.fitted_penalty is not None:
+            return float(self.fitted_penalty)
+        n = len(self)
+        if n < 3:
+            return PENALTIES[0]
+        scores = []
+        for penalty in PENALTIES:
+            total = 0.0
+            for t in range(n):
+                keep = np.arange(n) != t
+                for stats, label in ((self.known[t], 1.0), (self.unknown[t], 0.0)):
+                    lr = _ratio(self.resolving[keep], self.known[keep], self.unknown[keep],
+                                (stats[0], stats[1], self.resolving[t]), penalty)
+                    total += np.log((lr if label else 1.0) / (1.0 + lr))
+            scores.append(round(total / (2 * n), 9))      # equal to within rounding is equal
+        return PENALTIES[int(np.argmax(scores))]
 
     def to_json(self) -> dict:
         return {"format": FORMAT, "version": VERSION, "key": self.key, "method": self.method, "seed": int(self.seed),
                 "touches": int(self.touches), "resolving": np.round(self.resolving, 6).tolist(),
                 "known": np.round(self.known, 6).tolist(), "unknown": np.round(self.unknown, 6).tolist(),
-                "touched": list(self.touched)}
+                "touched": list(self.touched), "penalty": self.penalty}
 
     @classmethod
     def from_json(cls, d, source) -> "NullModel":
@@ -225,13 +274,16 @@ class NullModel:
             unknown = np.asarray(d["unknown"], dtype=np.float64).reshape(len(r), 2)
             touched = tuple(str(t) for t in d["touched"])
             key, method, seed, touches = str(d["key"]), str(d["method"]), int(d["seed"]), int(d["touches"])
+            fitted = None if d.get("penalty") is None else float(d["penalty"])
         except (KeyError, TypeError, ValueError, OverflowError) as exc:
             raise InputError(f"corrupted null model ({exc.__class__.__name__})", source) from None
         if len(touched) != len(r):
             raise InputError("corrupted null model (a touch without its model)", source)
         if not (np.isfinite(r).all() and np.isfinite(known).all() and np.isfinite(unknown).all()):
             raise InputError("corrupted null model (a value is not finite)", source)
-        return cls(key, r, known, unknown, touched, method, seed, touches)
+        if fitted is not None and fitted not in PENALTIES:
+            raise InputError(f"corrupted null model (a prior precision {fitted!r} it does not choose among)", source)
+        return cls(key, r, known, unknown, touched, method, seed, touches, fitted)
 
 
 def save(model: NullModel, folder: str | os.PathLike) -> Path:
