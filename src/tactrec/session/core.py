@@ -37,7 +37,7 @@ refinement (more searches only in step 5):
    way with the others in its score (:data:`STARTS`).  When the best pose
    does fit them all at their noise, the same searches cover its rivals:
    the models every touch fits on its own whose joint pose does not fit them
-   all.  That pose may be one the joint fit missed (each touch's own poses
+   all at their noise.  That pose may be one the joint fit missed (each touch's own poses
    on the model place the others wrongly), and a model is never counted out
    on a joint pose no search looked for.  Each search is the
    engine's (:mod:`tactrec.engine`): every place of each model at every
@@ -352,14 +352,15 @@ class Session(JointFit):
     def _rivals(self, use: list[int]) -> list[str]:
         """The models step 5 searches once the best pose fits every touch at their noise: those every
         touch ``use`` (indices) fits on its own (its own search's error within :meth:`_limits`) whose
-        joint pose does not fit them all.  Such a joint pose may be one the search missed, and a
-        model is never counted out on a pose no search looked for."""
+        joint pose does not fit them all at their noise (:meth:`fitted_at`), as the best's does.
+        Such a joint pose may be one the search missed, and a model is never counted out on a pose
+        no search looked for: a worse joint fit is evidence only once the search has looked."""
         limits = self._limits()
         own = [{r.model: r.error / r.scale for r in self.records[i].own.ranking if r.ok} for i in use]
         best = self.result.ranking[0].model
         out = []
         for h in self.result.ranking:
-            if h.model == best or all(h.consistent[i] for i in use):
+            if h.model == best or (all(h.consistent[i] for i in use) and self.fitted_at(h.error, use)):
                 continue
             if all(h.model in errors and errors[h.model] <= limits[i] for i, errors in zip(use, own)):
                 out.append(h.model)
