@@ -34,12 +34,14 @@ refinement (more searches only in step 5):
    score (:meth:`tactrec.recognition.Recognizer.recognize` with
    ``context``), and steps 2-4 run again on its poses; if still no pose fits
    them all at their noise, the touch kept before it is searched the same
-   way with the others in its score (:data:`STARTS`).  When the best pose
-   does fit them all at their noise, the same searches cover its rivals:
-   the models every touch fits on its own whose joint pose does not fit them
-   all at their noise.  That pose may be one the joint fit missed (each touch's own poses
-   on the model place the others wrongly), and a model is never counted out
-   on a joint pose no search looked for.  Each search is the
+   way with the others in its score (:data:`STARTS`).  Once the best pose
+   does fit them all at their noise, a second pass from the same starts
+   searches its rivals: the models every touch fits on its own whose joint
+   pose does not fit them all at their noise (a search of the first pass
+   stops once the best model fits, before it reaches a rival's pose).  That
+   pose may be one the joint fit missed (each touch's own poses on the model
+   place the others wrongly), and a model is never counted out on a joint
+   pose no search looked for.  Each search is the
    engine's (:mod:`tactrec.engine`): every place of each model at every
    rotation, screened with one point of each other touch's curves in the
    score, so it costs about what the touch's own search costs, whatever the
@@ -58,10 +60,10 @@ refinement (more searches only in step 5):
    whose pose does not fit every touch is covered.  Each search stops once
    its best pose fits the touches as well as their own searches fit each
    (the points-weighted mean of each touch's best fit on any model, or of
-   ``fit_limit``, whichever is larger).  They share one budget, the work
-   (closest-point queries) the touch's own search spent, times
-   ``search_budget``: each is given what is left (its first round whatever
-   it costs), and none starts once it is spent.  A method that counts no
+   ``fit_limit``, whichever is larger).  Each pass's searches share one
+   budget, the work (closest-point queries) the touch's own search spent,
+   times ``search_budget``: each is given what is left (its first round
+   whatever it costs), and none starts once it is spent.  A method that counts no
    work has no budget, and one that scores no other touches' points (the
    paper's) searches no more than step 1;
 6. the probabilities (:mod:`tactrec.probability`) come from every model's
@@ -131,8 +133,9 @@ class Session(JointFit):
         other touches' points in the score (step 5 of the module text, for a method that scores
         a context); False keeps to step 1.
     search_budget : float or None
-        Step 5's budget, in multiples of the work the touch's own search spent (1: an add costs
-        at most about twice the touch alone); None gives the search the method's own budget.
+        Step 5's budget per pass, in multiples of the work the touch's own search spent (1: an add
+        costs at most about three times the touch alone, twice where no rival is left to search);
+        None gives the search the method's own budget.
     """
 
     def __init__(self, recognizer, *, joint_search: bool = True, search_budget: float | None = 1.0):
@@ -244,37 +247,53 @@ class Session(JointFit):
             self._stages[stage] += time.perf_counter() - start
 
     def _search_jointly(self, slipped: set, work: int) -> None:
-        """Step 5: while no pose found fits every touch kept at their noise, search again from one of
-        them with every other touch kept in the score: the new touch, then the one kept before it
-        (:data:`STARTS`), over the models the new touch fits on its own whose pose does not fit
-        them all (every such model once the best pose fits them all but not at their noise; its
-        rivals, :meth:`_rivals`, once it fits them at their noise); each search stops once a pose
-        fits the touches as well as their own searches fit each.
-        ``work``: what the touch's own search spent (the budget's unit, shared by the searches)."""
-        budget = np.inf if self.search_budget is None or work <= 0 else self.search_budget * work
+        """Step 5, in two passes over the same starts, the new touch then the one kept before it
+        (:data:`STARTS`), each search with every other touch kept in the score: while no pose found
+        fits every touch kept at their noise, over the models the new touch fits on its own whose
+        pose does not fit them all (every such model once the best pose fits them all but not at
+        their noise); then, once the best pose fits them at their noise, over its rivals
+        (:meth:`_rivals`).  A search of the first pass stops once a pose fits the touches as well
+        as their own searches fit each, so it may stop on the best model before it reached a
+        rival's pose: the second looks for the rivals' own, and stops once a pose of one fits as
+        well as the best's.  Each pass has its budget, ``work``
+        (what the touch's own search spent) x ``search_budget``, shared by its searches: a rival
+        is searched even where finding the best took the first pass's."""
         use = [i for i in range(len(self.records)) if i not in slipped]
         fit = self.pooled(self._reference()[use], use)
-        for start in use[::-1][:STARTS]:
-            explained = self._explained(slipped)
-            if budget <= 0:
-                return
-            if explained and self._fitted():
-                among = self._rivals(use)
-            else:
-                among = self._unexplained(slipped, every=explained)
-            if not among:
-                return
-            others = [self.records[i] for i in use if i != start]
-            context = [c for r in others for c in r.features.data.curves]          # the points each kept
-            tips = [r.tip for r in others for _ in r.features.data.curves]
-            surface = [c for r in others for c in r.surface_curves]
-            kept = self.records[start].features.data
-            found = self._timed("context", self.recognizer.recognize, kept, context=context,
-                                among=among, fit=fit, budget=None if np.isinf(budget) else int(budget),
-                                context_tips=tips, context_surface=surface)
-            budget -= found.work
-            self.searches.append(found)
-            self.result = self._joint_fit(found)
+        starts = use[::-1][:STARTS]
+        for rivals in (False, True):
+            budget = np.inf if self.search_budget is None or work <= 0 else self.search_budget * work
+            for start in starts:
+                explained = self._explained(slipped)
+                if budget <= 0:
+                    break
+                if explained and self._fitted():
+                    among = self._rivals(use) if rivals else []
+                elif rivals:
+                    return                                    # the best pose itself was not found
+                else:
+                    among = self._unexplained(slipped, every=explained)
+                if not among:
+                    break
+                # a rival is level once a pose of it fits as well as the best's does
+                goal = min(fit, self.result.ranking[0].error) if rivals else fit
+                budget -= self._search_from(start, use, among, goal, budget)
+
+    def _search_from(self, start: int, use: list[int], among: list[str], fit: float, budget: float) -> int:
+        """One search of step 5: touch ``start`` searched again over the models ``among`` with the
+        other touches ``use`` in its score, until a pose fits them as well as ``fit`` or ``budget``
+        is spent; the joint fit is made again on its poses.  Returns the work it spent."""
+        others = [self.records[i] for i in use if i != start]
+        context = [c for r in others for c in r.features.data.curves]          # the points each kept
+        tips = [r.tip for r in others for _ in r.features.data.curves]
+        surface = [c for r in others for c in r.surface_curves]
+        kept = self.records[start].features.data
+        found = self._timed("context", self.recognizer.recognize, kept, context=context,
+                            among=among, fit=fit, budget=None if np.isinf(budget) else int(budget),
+                            context_tips=tips, context_surface=surface)
+        self.searches.append(found)
+        self.result = self._joint_fit(found)
+        return found.work
 
     def kept(self) -> list[int]:
         """The touches the session's result uses: all but those it calls slipped."""
