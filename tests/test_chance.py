@@ -1,6 +1,7 @@
 """The null model of chance fits (tactrec.chance): fitted on a database's own models, stored with it,
 and what it does to the probabilities of touches of models in the database and of models left out."""
 
+import dataclasses
 import json
 from importlib import resources
 from pathlib import Path
@@ -8,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tactrec.chance import FILE, catalogue_key, load, save
+from tactrec.chance import FILE, PENALTIES, catalogue_key, load, save
 from tactrec.chance.fit import calibrate
 from tactrec.cli import main
 from tactrec.database import build_database, build_entries, load_database
@@ -75,9 +76,15 @@ def test_stored_with_the_database_and_read_back(tmp_path, fitted):
     assert loaded.chance.key == catalogue_key(loaded.entries) == model.key
     assert np.allclose(loaded.chance.known, model.known, atol=1e-6)
     # the prior chosen when it was fitted is read back, not chosen again on the rounded statistics
-    assert loaded.chance.penalty == model.penalty
+    assert loaded.chance.fitted_penalty == model.penalty
     assert all(np.isclose(loaded.chance.ratio(x, x + 0.5, r), model.ratio(x, x + 0.5, r), rtol=1e-4)
                for x in (-1.0, 0.0, 1.0) for r in model.resolving[::7])
+    other = next(p for p in PENALTIES if p != model.penalty)
+    save(dataclasses.replace(model, fitted_penalty=other), tmp_path / "db")
+    assert load(tmp_path / "db").penalty == other
+    # a model left out chooses its own, once
+    left = model.without([MODELS[0]])
+    assert left.fitted_penalty is None and left is model.without([MODELS[0]]) and left.penalty in PENALTIES
     with Recognizer(loaded) as r:                       # a database's recognizer takes its null model
         assert r.chance is loaded.chance
 
@@ -97,7 +104,7 @@ def test_a_null_model_of_other_models_is_not_used(tmp_path, fitted):
                                   '"key": "k", "method": "fast", "seed": 1e400, "touches": 2, "resolving": [], '
                                   '"known": [], "unknown": [], "touched": []}', '{"format": "tactrec-chance", '
                                   '"version": 1, "key": "k", "method": "fast", "seed": 0, "touches": 2, "resolving": '
-                                  '[1.0], "known": [[0, 1]], "unknown": [[1, 1]], "touched": ["a"], "penalty": 5}'])
+                                  '[1.0], "known": [[0, 1]], "unknown": [[1, 1]], "touched": ["a"], "penalty": "0.1"}'])
 def test_a_damaged_null_model_is_named_set_aside_and_calibrated_again(tmp_path, capsys, text):
     """Read directly, a damaged null model is an error naming its file; a database holding one says so
     in one warning line and scores by the fit test alone; ``tactrec calibrate`` writes it again."""

@@ -27,7 +27,7 @@ The regression is smooth where the touches are few and monotone where the eviden
 a slope of the wrong sign is dropped); each standardised slope has a Gaussian prior, so that
 classes the touches separate completely do not run to infinity, whose precision the calibration
 touches choose themselves (:attr:`NullModel.penalty`: of :data:`PENALTIES`, the one under which
-each touch, left out, is predicted best by the others); a touch beyond every calibration
+each model's touches are predicted best by the other models'); a touch beyond every calibration
 touch is read as the farthest of them; and the ratio is held within ``1 / (k + 1)`` and ``k + 1``
 over ``k`` touches: no ratio claims more than that many calibration touches can show.
 A touch more (less) resolving than every calibration touch is read with the most (least)
@@ -141,15 +141,16 @@ def _logistic(x: np.ndarray, y: np.ndarray, penalty: float) -> np.ndarray:
 SIGNS = (-1.0, 1.0)
 
 
-def _ratio(resolving, known, unknown, query, penalty: float) -> float:
-    """:meth:`NullModel.ratio` of ``query = (x1, x2, r)`` over the calibration touches ``resolving (n,)``,
-    ``known, unknown (n, 2)``, slopes with a prior of precision ``penalty``; 1 without touches."""
+def _ratios(resolving, known, unknown, r: float, queries, penalty: float) -> np.ndarray:
+    """:meth:`NullModel.ratio` at resolving power ``r`` of each of ``queries (m, 2)`` (``x1, x2``), over
+    the calibration touches ``resolving (n,)``, ``known, unknown (n, 2)``, slopes with a prior of
+    precision ``penalty`` (one fit for them all); 1 without touches."""
+    queries = np.asarray(queries, dtype=np.float64).reshape(-1, 2)
     n = len(resolving)
     if n == 0:
-        return 1.0
-    x1, x2, r = (float(v) for v in query)
+        return np.ones(len(queries))
     k = min(n, max(NEAREST, n // 4))
-    near = np.argsort(np.abs(resolving - r), kind="stable")[:k]
+    near = np.argsort(np.abs(resolving - float(r)), kind="stable")[:k]
 
     def features(s):
         return np.column_stack([s[:, 0], s[:, 1] - s[:, 0]])
@@ -157,7 +158,7 @@ def _ratio(resolving, known, unknown, query, penalty: float) -> float:
     x = np.vstack([features(known[near]), features(unknown[near])])
     y = np.concatenate([np.ones(k), np.zeros(k)])
     # a touch beyond every calibration touch is read as the farthest of them
-    q = np.clip(np.array([x1, x2 - x1], dtype=np.float64), x.min(axis=0), x.max(axis=0))
+    q = np.clip(features(queries), x.min(axis=0), x.max(axis=0))
     use = [0, 1]
     while True:                     # a slope of the wrong sign is dropped and the rest fitted again
         centre = x[:, use].mean(axis=0)
@@ -167,9 +168,9 @@ def _ratio(resolving, known, unknown, query, penalty: float) -> float:
         if not wrong:
             break
         use = [f for f in use if f not in wrong]
-    logit = w[0] + float((w[1:] * (q[use] - centre) / scale).sum())
+    logit = w[0] + (w[1:] * (q[:, use] - centre) / scale).sum(axis=1)
     cap = np.log(k + 1.0)
-    return float(np.exp(np.clip(logit, -cap, cap)))
+    return np.exp(np.clip(logit, -cap, cap))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -230,28 +231,28 @@ class NullModel:
         evidence either way) for statistics that are not finite."""
         if not np.isfinite([x1, x2, resolving]).all():
             return 1.0
-        return _ratio(self.resolving, self.known, self.unknown, (x1, x2, resolving), self.penalty)
+        return float(_ratios(self.resolving, self.known, self.unknown, resolving, [(x1, x2)], self.penalty)[0])
 
     @functools.cached_property
     def penalty(self) -> float:
-        """The slopes' prior precision: of :data:`PENALTIES`, the one whose ratios predict each
-        calibration touch best (the mean log-likelihood of its known and unknown recognitions) from
-        the other touches alone; the first (the most cautious) of equals."""
+        """The slopes' prior precision: of :data:`PENALTIES`, the one whose ratios predict the
+        calibration touches best (the mean log-likelihood of their known and unknown recognitions),
+        each model's touches from the other models' alone, as a touch of an object the calibration
+        never saw would be; the first (the most cautious) of equals."""
         if self.fitted_penalty is not None:
             return float(self.fitted_penalty)
-        n = len(self)
-        if n < 3:
+        names = np.array(self.touched)
+        if len(set(self.touched)) < 2:
             return PENALTIES[0]
         scores = []
         for penalty in PENALTIES:
             total = 0.0
-            for t in range(n):
-                keep = np.arange(n) != t
-                for stats, label in ((self.known[t], 1.0), (self.unknown[t], 0.0)):
-                    lr = _ratio(self.resolving[keep], self.known[keep], self.unknown[keep],
-                                (stats[0], stats[1], self.resolving[t]), penalty)
-                    total += np.log((lr if label else 1.0) / (1.0 + lr))
-            scores.append(round(total / (2 * n), 9))      # equal to within rounding is equal
+            for t in range(len(self)):
+                keep = names != names[t]
+                lr = _ratios(self.resolving[keep], self.known[keep], self.unknown[keep], self.resolving[t],
+                             [self.known[t], self.unknown[t]], penalty)
+                total += float(np.log(lr[0] / (1.0 + lr[0])) + np.log(1.0 / (1.0 + lr[1])))
+            scores.append(round(total / (2 * len(self)), 9))      # equal to within rounding is equal
         return PENALTIES[int(np.argmax(scores))]
 
     def to_json(self) -> dict:
@@ -274,15 +275,17 @@ class NullModel:
             unknown = np.asarray(d["unknown"], dtype=np.float64).reshape(len(r), 2)
             touched = tuple(str(t) for t in d["touched"])
             key, method, seed, touches = str(d["key"]), str(d["method"]), int(d["seed"]), int(d["touches"])
-            fitted = None if d.get("penalty") is None else float(d["penalty"])
+            fitted = d.get("penalty")
+            if fitted is not None and (isinstance(fitted, bool) or not isinstance(fitted, (int, float))):
+                raise TypeError("penalty")
         except (KeyError, TypeError, ValueError, OverflowError) as exc:
             raise InputError(f"corrupted null model ({exc.__class__.__name__})", source) from None
         if len(touched) != len(r):
             raise InputError("corrupted null model (a touch without its model)", source)
         if not (np.isfinite(r).all() and np.isfinite(known).all() and np.isfinite(unknown).all()):
             raise InputError("corrupted null model (a value is not finite)", source)
-        if fitted is not None and fitted not in PENALTIES:
-            raise InputError(f"corrupted null model (a prior precision {fitted!r} it does not choose among)", source)
+        if fitted is not None and float(fitted) not in PENALTIES:
+            fitted = None                       # a precision this version does not offer: chosen again
         return cls(key, r, known, unknown, touched, method, seed, touches, fitted)
 
 

@@ -57,10 +57,12 @@ refinement (more searches only in step 5):
    model when the best pose fits them all, but not at their noise): a model
    the touch does not fit cannot fit it jointly.  When the new touch's own
    search fitted no model, its errors rule nothing out and every model
-   whose pose does not fit every touch is covered.  Each search stops once
-   its best pose fits the touches as well as their own searches fit each
-   (the points-weighted mean of each touch's best fit on any model, or of
-   ``fit_limit``, whichever is larger).  Each pass's searches share one
+   whose pose does not fit every touch is covered.  A search of the first
+   pass stops once its best pose fits the touches as well as their own
+   searches fit each (the points-weighted mean of each touch's best fit on
+   any model, or of ``fit_limit``, whichever is larger); one of the
+   rivals' pass once a rival fits them as well as the best's joint pose
+   does (or its start touch's own ``fit_limit``, where that is larger).  Each pass's searches share one
    budget, the work (closest-point queries) the touch's own search spent,
    times ``search_budget``: each is given what is left (its first round
    whatever it costs), and none starts once it is spent.  A method that counts no
@@ -255,7 +257,7 @@ class Session(JointFit):
         (:meth:`_rivals`).  A search of the first pass stops once a pose fits the touches as well
         as their own searches fit each, so it may stop on the best model before it reached a
         rival's pose: the second looks for the rivals' own, and stops once a pose of one fits as
-        well as the best's.  Each pass has its budget, ``work``
+        well as the best's (or the start touch's own fit limit, where that is larger).  Each pass has its budget, ``work``
         (what the touch's own search spent) x ``search_budget``, shared by its searches: a rival
         is searched even where finding the best took the first pass's."""
         use = [i for i in range(len(self.records)) if i not in slipped]
