@@ -62,12 +62,13 @@ refinement (more searches only in step 5):
    searches fit each (the points-weighted mean of each touch's best fit on
    any model, or of ``fit_limit``, whichever is larger); one of the
    rivals' pass once a rival fits them as well as the best's joint pose
-   does (or its start touch's own ``fit_limit``, where that is larger).  Each pass's searches share one
-   budget, the work (closest-point queries) the touch's own search spent,
-   times ``search_budget``: each is given what is left (its first round
-   whatever it costs), and none starts once it is spent.  A method that counts no
-   work has no budget, and one that scores no other touches' points (the
-   paper's) searches no more than step 1;
+   does (or its start touch's own ``fit_limit``, where that is larger).
+   Each pass's searches share one budget, the work (closest-point queries)
+   the touch's own search spent, times ``search_budget``: each is given
+   what is left (its first round whatever it costs), and none starts once
+   it is spent.  A method that counts no work has no budget, and one that
+   scores no other touches' points (the paper's) searches no more than
+   step 1;
 6. the probabilities (:mod:`tactrec.probability`) come from every model's
    distances to the points of all touches kept, under its joint pose, and
    from the lines the sensor followed without meeting anything
@@ -257,9 +258,9 @@ class Session(JointFit):
         (:meth:`_rivals`).  A search of the first pass stops once a pose fits the touches as well
         as their own searches fit each, so it may stop on the best model before it reached a
         rival's pose: the second looks for the rivals' own, and stops once a pose of one fits as
-        well as the best's (or the start touch's own fit limit, where that is larger).  Each pass has its budget, ``work``
-        (what the touch's own search spent) x ``search_budget``, shared by its searches: a rival
-        is searched even where finding the best took the first pass's."""
+        well as the best's (or the start touch's own fit limit, where that is larger).  Each pass
+        has its budget, ``work`` (what the touch's own search spent) x ``search_budget``, shared by
+        its searches: a rival is searched even where finding the best took the first pass's."""
         use = [i for i in range(len(self.records)) if i not in slipped]
         fit = self.pooled(self._reference()[use], use)
         starts = use[::-1][:STARTS]
