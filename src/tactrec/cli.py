@@ -364,6 +364,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="multi-touch: which next-touch strategies to run (random, next; default both)")
     p.add_argument("--settings", type=lambda text: text.split(","), metavar="NAME,...",
                    help="sensor: which settings to run besides clean ('tip 1 mm', 'outliers 3%%', ...; default all)")
+    p.add_argument("--against", metavar="FILE", default=None,
+                   help="answers: another run's answers.json, to list the entries whose JSON differs")
     p.add_argument("--out", metavar="DIR", help="output folder (default bench-out)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_bench)

@@ -27,6 +27,21 @@ SCAN_KINDS = {**{name: ("shipped", "paper-like") for name in ("paper-fig11", "pa
               **{name: ("shipped", "other", "cad") for name in ("fast-vs-paper", "fit-limit", "field")}}
 
 
+def _answers_file(path: str) -> dict:
+    """Another run's ``answers.json`` (:mod:`tactrec.bench.answers`), read; one that is not is an
+    :class:`InputError` naming it."""
+    import json
+
+    try:
+        table = json.loads(Path(path).read_text(encoding="utf-8"))
+        if not (isinstance(table, dict) and isinstance(table.get("answers"), dict)
+                and isinstance(table.get("digests"), dict)):
+            raise ValueError("no answers")
+    except (OSError, ValueError) as exc:
+        raise InputError(f"not an answers.json of tactrec bench answers ({exc.__class__.__name__})", path) from None
+    return table
+
+
 def cmd_bench(args) -> int:
     import shlex
 
@@ -82,6 +97,10 @@ def cmd_bench(args) -> int:
             raise InputError("--settings applies to sensor only", args.name)
         extra["settings"] = ("clean",) + tuple(s for s in _known(args.settings, SETTINGS, "setting", "--settings",
                                                                  args.name) if s != "clean")
+    if args.against is not None:
+        if args.name != "answers":
+            raise InputError("--against applies to answers only", args.name)
+        extra["against"] = _answers_file(args.against)
     if args.paper_option:
         extra["options"] = dict(args.paper_option)
     if args.delta_only or args.lengths or args.angles:

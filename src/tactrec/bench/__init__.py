@@ -53,4 +53,5 @@ BENCHMARKS: dict[str, Benchmark] = {
     "serve": Benchmark("serve", "run", "what a request to tactrec serve costs beyond its recognition"),
     "sensor": Benchmark("sensor", "run", "touches as sensors record them: tip, outliers, miss, spacing, jitter"),
     "viewer": Benchmark("viewer", "run", "tactrec show's page: its size, and the time a browser takes to draw it"),
+    "answers": Benchmark("answers", "run", "the JSON of 50 seeded recognitions and 5 sessions, and their digests"),
 }
