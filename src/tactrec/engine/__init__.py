@@ -13,11 +13,7 @@ from __future__ import annotations
 
 import threading
 
-__all__ = ["one_thread", "preload", "LOOKUP_COST", "BRICK"]
-
-#: cells along a field brick's edge (a brick stores BRICK + 1 samples a side, so that no lookup
-#: crosses bricks: :mod:`tactrec.surfaces.mesh_field`)
-BRICK = 8
+__all__ = ["one_thread", "preload", "LOOKUP_COST"]
 
 #: one field lookup, in closest-point queries (a search's budget unit): measured 1.2 M exact
 #: queries and 50-100 M lookups a second on this package's benchmark machine

@@ -26,7 +26,8 @@ import dataclasses
 
 import numpy as np
 
-from .gain import pose_jacobian
+from ..linalg import solve_spd
+from .gain import model_points, pose_jacobian
 from .predict import to_model, to_world
 
 __all__ = ["SITES", "TILT", "Place", "places", "pose_spread", "touched_side"]
@@ -54,12 +55,14 @@ def pose_spread(model, pose, scale: float, H0: np.ndarray, x_world: np.ndarray, 
     """How far ``(n,)`` (world units, one standard error) the surface of ``model`` under ``pose (3, 4)``
     may move along its normal at world points ``x_world (n, 3)`` under a pose fitted to touches of
     information ``H0`` (model units, :func:`~tactrec.proposal.gain.information`) and noise ``sigma``:
-    ``sigma sqrt(j^T (H0 + lambda I)^-1 j)``.  The prior ``lambda = (sigma s / size)^2`` (``s`` the
-    scale, ``size`` the model's) holds the pose within the object's size: directions the touches
-    leave free (along a cylinder's axis, over a flat face) move the surface by about that much."""
-    _, J = pose_jacobian(model, scale * np.asarray(x_world, dtype=np.float64) @ pose[:, :3].T + pose[:, 3])
-    prior = (float(sigma) * float(scale) / float(model.size)) ** 2
-    C = np.linalg.inv(H0 + max(prior, 1e-300) * np.eye(6))
+    ``sigma sqrt(j^T (H0 + P)^-1 j)``.  The prior ``P`` holds the pose within the object's size:
+    ``(sigma s / size)^2`` on a turn measured in model sizes, ``(sigma s)^2`` on a shift (``s`` the
+    scale, ``size`` the model's), so that directions the touches leave free (along a cylinder's
+    axis, over a flat face) move the surface by about that much."""
+    _, J = pose_jacobian(model, model_points(pose, scale, x_world))
+    prior = max((float(sigma) * float(scale) / float(model.size)) ** 2, 1e-300)
+    P = np.diag([prior * model.size ** 2] * 3 + [prior] * 3)
+    C = solve_spd((H0 + P)[None].repeat(6, axis=0), np.eye(6))                   # rows: the inverse, no LAPACK
     return float(sigma) * np.sqrt(np.maximum(np.einsum("ni,ij,nj->n", J, C, J), 0.0))
 
 

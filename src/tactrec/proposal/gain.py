@@ -6,10 +6,11 @@ from __future__ import annotations
 import numpy as np
 from scipy.special import erf
 
+from ..linalg import transform
 from ..probability import open_world
-from ..registration.solver import jacobian
+from ..registration.step import jacobian, normal_matrix, prior_steps
 
-__all__ = ["entropy", "pose_jacobian", "information", "refit", "excess", "separation", "expected_gain"]
+__all__ = ["entropy", "model_points", "pose_jacobian", "information", "refit", "excess", "separation", "expected_gain"]
 
 
 def entropy(p: np.ndarray) -> float:
@@ -17,37 +18,41 @@ def entropy(p: np.ndarray) -> float:
     return float(-np.sum(p * np.log2(p)))
 
 
+def model_points(pose: np.ndarray, scale: float, x_world: np.ndarray) -> np.ndarray:
+    """World points ``x_world (..., 3)`` in the model frame under ``pose (3, 4)`` and ``scale``."""
+    x = np.asarray(x_world, dtype=np.float64)
+    return transform(pose[None, :, :3], pose[None, :, 3], scale * x.reshape(-1, 3))[0].reshape(x.shape)
+
+
 def pose_jacobian(model, moved: np.ndarray):
     """Signed distances ``(m,)`` of model-frame points ``moved (m, 3)`` and their pose Jacobian
-    ``(m, 6)``: the change of each distance under a small turn ``w`` (per model size) and shift
-    ``u`` of the model frame, ``(m x n) . w + n . u``."""
+    ``(m, 6)``: the change of each distance under a small turn ``w`` about the model's origin and
+    shift ``u`` of the model frame, ``(m x n) . w + n . u`` (:func:`tactrec.registration.step.jacobian`)."""
     d, n = model.planes(moved)
-    J = jacobian(moved, n)
-    J[:, :3] /= model.size
-    return d, J
+    return d, jacobian(moved, n)
 
 
 def information(model, pose: np.ndarray, scale: float, x_world: np.ndarray) -> np.ndarray:
-    """``J0^T J0 (6, 6)`` of world points ``x_world (m, 3)`` under ``pose (3, 4)``, model units."""
-    _, J = pose_jacobian(model, scale * x_world @ pose[:, :3].T + pose[:, 3])
-    return np.einsum("mi,mj->ij", J, J)
+    """``J0^T J0 (6, 6)`` of world points ``x_world (m, 3)`` under ``pose (3, 4)``, model units
+    (:func:`tactrec.registration.step.normal_matrix`)."""
+    moved = model_points(pose, scale, x_world)
+    return normal_matrix(moved, np.ascontiguousarray(model.planes(moved)[1], dtype=np.float64))
 
 
 def refit(model, pose: np.ndarray, scale: float, H0: np.ndarray, x_world: np.ndarray, kept: np.ndarray):
     """Each of ``n`` predicted touches ``x_world (n, k, 3)`` against ``model`` once the pose
     ``(3, 4)`` is refitted to that touch's predicted points (``kept (n, k)``, bool) and the earlier
-    touches (information ``H0 (6, 6)``) together, by one Gauss-Newton step (module text): the
-    touch's signed distances after the step ``(n, k)`` (0 where not predicted) and the sum of
-    squares the step adds to the earlier touches' ``(n,)``, world units."""
-    n, k = x_world.shape[:2]
-    r, J = pose_jacobian(model, (scale * x_world.reshape(-1, 3) @ pose[:, :3].T + pose[:, 3]))
-    r, J = r.reshape(n, k) * kept, J.reshape(n, k, 6) * kept[..., None]
-    H = H0[None] + np.einsum("nmi,nmj->nij", J, J)
-    b = np.einsum("nmi,nm->ni", J, r)
-    ridge = 1e-12 * np.maximum(np.trace(H, axis1=1, axis2=2), 1e-300)
-    step = -np.linalg.solve(H + ridge[:, None, None] * np.eye(6), b[..., None])[..., 0]
-    after = r + np.einsum("nmi,ni->nm", J, step)
-    return after / scale, np.einsum("ni,ij,nj->n", step, H0, step) / scale ** 2
+    touches (information ``H0 (6, 6)``) together, by the one damped point-to-plane step
+    (:func:`tactrec.registration.step.prior_steps`; module text): the touch's signed distances
+    after the step ``(n, k)`` (0 where not predicted) and the sum of squares the step adds to the
+    earlier touches' ``(n,)``, world units."""
+    moved = model_points(pose, scale, x_world)
+    r, normals = model.planes(moved.reshape(-1, 3))
+    shape = moved.shape
+    c = np.ascontiguousarray
+    _, after, added = prior_steps(c(H0, dtype=np.float64), c(moved), c(normals, dtype=np.float64).reshape(shape),
+                                  c(r, dtype=np.float64).reshape(shape[:2]), c(kept, dtype=np.float64))
+    return after / scale, added / scale ** 2
 
 
 def excess(offset: np.ndarray, sigma: float) -> np.ndarray:

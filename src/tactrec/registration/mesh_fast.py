@@ -28,11 +28,11 @@ from __future__ import annotations
 import numpy as np
 
 from ..estimation import LocalGeometry
-from ..linalg import compose, gram, rotate, solve_spd, stable_order, stable_prefix, transform
+from ..linalg import compose, rotate, stable_order, stable_prefix, transform
 from ..surfaces.mesh import MeshModel
 from ..surfaces.mesh_curvature import fitted_frame, quadric_curvatures, tangents
 from .result import Registration, cross, local_frame, rotations_from_vectors, rotations_z
-from .solver import jacobian
+from .step import covariance
 
 __all__ = ["places", "curvature_gaps", "leading_places", "first_per_cell", "first_per_place", "fibonacci_sphere",
            "frame_poses", "registration", "data_curvatures", "prepare", "starting_poses"]
@@ -207,17 +207,14 @@ def starting_poses(model: MeshModel, geometry: LocalGeometry, x: np.ndarray, *, 
 def contact_spread(model: MeshModel, R: np.ndarray, t: np.ndarray, x: np.ndarray, contact: np.ndarray) -> float:
     """How well the data ``x (m, 3)`` pin the contact under pose ``R (3, 3), t (3,)``: the root of the
     trace of the moved contact's covariance (model units), from the pose's covariance
-    ``s^2 (J^T J)^-1`` at the fit (``J`` the point-to-plane Jacobian,
-    :func:`tactrec.registration.solver.jacobian`; ``s^2`` the residuals' variance).  Large where
-    the data leave a direction free: along a cylinder's axis, over a flat patch."""
+    ``s^2 (J^T J)^-1`` at the fit (:func:`tactrec.registration.step.covariance`, the one
+    point-to-plane Jacobian; ``s^2`` the residuals' variance).  Large where the data leave a
+    direction free: along a cylinder's axis, over a flat patch."""
     moved = transform(R[None], t[None], x)
     residual, n = model.planes(moved)
-    J = jacobian(moved, n)[0]                                                           # (m, 6)
     m = len(x)
     s2 = float(np.sum(residual[0] ** 2)) / max(m - 6, 1)
-    JtJ = gram(J[None])[0]
-    JtJ = JtJ + 1e-9 * (np.trace(JtJ) / 6.0 + 1e-300) * np.eye(6)
-    cov = s2 * solve_spd(np.broadcast_to(JtJ, (6, 6, 6)), np.eye(6))                   # rows: the inverse
+    cov = s2 * covariance(np.ascontiguousarray(moved[0]), np.ascontiguousarray(n[0], dtype=np.float64))
     p = rotate(R, contact) + t
     Jp = np.zeros((3, 6))
     Jp[:, :3] = -np.array([[0.0, -p[2], p[1]], [p[2], 0.0, -p[0]], [-p[1], p[0], 0.0]])

@@ -7,11 +7,11 @@ distances of the moved data points to the planes the model gives them
 (:meth:`planes` of a surface model: a mesh's closest-point planes, a
 closed-form surface's first-order distances ``f / |grad f|``, eq. 11).  A
 small turn ``w`` about the origin and a shift ``v`` of the model frame move
-each residual by ``(y x n) . w + n . v`` (:func:`jacobian`).
+each residual by ``(y x n) . w + n . v`` (:func:`.step.jacobian`).
 
 The arithmetic is element-wise (:mod:`tactrec.linalg`) or a compiled
-kernel's fixed-order loops (:func:`tactrec.engine.kernels.plane_step`, no
-fused or reordered operations): the same bits on every CPU.  The paper's own
+kernel's fixed-order loops (:mod:`.step`: the one Jacobian and the one
+damping rule, no fused or reordered operations): the same bits on every CPU.  The paper's own
 registrations (:mod:`.closedform_paper`, :mod:`.mesh_paper`) keep the
 paper's steps.
 """
@@ -25,7 +25,7 @@ import numpy as np
 from ..linalg import transform
 from .result import cross
 
-__all__ = ["Criteria", "Fit", "jacobian", "step", "solve", "mean_distance"]
+__all__ = ["Criteria", "Fit", "step", "solve", "mean_distance"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -34,7 +34,7 @@ class Criteria:
     more than ``tolerance`` x the data's reach (its largest distance from its centroid).  With
     ``predict``, the errors returned are those the last step's linearisation predicts, which
     spares a last query of every point.  ``history`` > 0 accelerates the steps by Anderson's
-    extrapolation from that many past steps (:mod:`tactrec.engine.anderson`)."""
+    extrapolation from that many past steps (:mod:`.anderson`)."""
 
     iterations: int
     tolerance: float = 1e-5
@@ -65,14 +65,6 @@ class Fit:
         return iter((self.R, self.t, self.error, self.queries))
 
 
-def jacobian(moved: np.ndarray, normals: np.ndarray) -> np.ndarray:
-    """The residuals' derivatives ``(..., 6)`` at points ``moved (..., 3)`` with plane normals
-    ``normals (..., 3)``: ``(y x n, n)``, for a turn ``w`` about the origin and a shift ``v``."""
-    J = np.empty(np.broadcast_shapes(moved.shape, normals.shape)[:-1] + (6,))
-    J[..., :3] = cross(moved, normals)
-    J[..., 3:] = normals
-    return J
-
 
 def step(R: np.ndarray, t: np.ndarray, moved: np.ndarray, normals: np.ndarray, residuals: np.ndarray):
     """One damped Gauss-Newton (Levenberg-Marquardt) step on poses ``R (h, 3, 3), t (h, 3)``.
@@ -82,7 +74,7 @@ def step(R: np.ndarray, t: np.ndarray, moved: np.ndarray, normals: np.ndarray, r
     directions that a flat or cylindrical patch leaves unconstrained from running away.  Returns
     the new poses, the steps ``(h, 6)`` and the residuals the linearisation predicts after them
     ``(h, m)``."""
-    from ..engine.kernels import plane_step         # compiled: the steps of every pose at once
+    from .step import plane_step         # compiled: the steps of every pose at once
 
     c = np.ascontiguousarray
     return plane_step(c(R, dtype=np.float64), c(t, dtype=np.float64), c(moved, dtype=np.float64),
@@ -148,7 +140,7 @@ def solve(model, R: np.ndarray, t: np.ndarray, x: np.ndarray, criteria: Criteria
 
 
 class _Anderson:
-    """The acceleration state of a batch of poses (:func:`tactrec.engine.anderson.anderson`): where
+    """The acceleration state of a batch of poses (:func:`.anderson.anderson`): where
     each started, its history, the plain step's pose and the error it was extrapolated from."""
 
     def __init__(self, R: np.ndarray, t: np.ndarray, history: int, reach: float):
@@ -174,7 +166,7 @@ class _Anderson:
 
     def extrapolate(self, which, R, t, Rg, tg, error):
         """Poses ``which`` stepped from ``R, t`` (at ``error``) to ``Rg, tg``: their extrapolations."""
-        from ..engine.anderson import anderson          # compiled
+        from .anderson import anderson          # compiled
 
         c = np.ascontiguousarray
         U, G, count = c(self.U[which]), c(self.G[which]), c(self.count[which])

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..linalg import gram
-from ..registration.solver import jacobian
+from ..registration.step import jacobian
 from .fit import joint_model, per_touch, refine
 
 __all__ = ["free_poses", "distinct", "FAMILY", "APART", "FREE", "FAMILY_ITERATIONS"]
@@ -24,8 +24,9 @@ FAMILY, APART = 5, 0.5
 FREE, FAMILY_ITERATIONS = 1e-3, 6
 
 
-def free_poses(session, model, best, use: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """``best``'s pose, then poses along the motions the touches leave free (the directions
+def free_poses(touches, model, best, use: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``best``'s pose, then poses along the motions the touches leave free (``touches``, a
+    :class:`~.touches.Touches`) (the directions
     of least curvature of the fit's point-to-plane normal matrix, below :data:`FREE` x its
     largest): each moved by a quarter and a half of the model's size both ways, refined,
     and kept if every touch used is still consistent with it (see :func:`distinct`)."""
@@ -51,19 +52,19 @@ def free_poses(session, model, best, use: np.ndarray, x: np.ndarray) -> np.ndarr
             R.append(dR @ best.rotation)
             t.append(dR @ (best.translation - q) + q + a * slide)
     if not R:
-        return distinct(session, best, np.empty((0, 3, 3)), np.empty((0, 3)))
-    points, tips = [f.points for f in session.features], session.tips
+        return distinct(touches, best, np.empty((0, 3, 3)), np.empty((0, 3)))
+    points, tips = [f.points for f in touches.features], touches.tips
     R, t = refine(joint_model(model, points, tips, best.scale, use), np.array(R), np.array(t), x, FAMILY_ITERATIONS)
     per = per_touch(model, R, t, points, best.scale, tips)
-    fits = session.consistent(best.model, per)[:, use].all(axis=1)
-    return distinct(session, best, R[fits], t[fits])
+    fits = touches.consistent(best.model, per)[:, use].all(axis=1)
+    return distinct(touches, best, R[fits], t[fits])
 
 
-def distinct(session, best, R: np.ndarray, t: np.ndarray) -> np.ndarray:
+def distinct(touches, best, R: np.ndarray, t: np.ndarray) -> np.ndarray:
     """``best``'s pose and up to :data:`FAMILY` - 1 of the poses ``R, t`` that put the touches'
     contacts more than :data:`APART` x the touches' reach from where every pose kept puts them."""
-    contacts = np.array([f.geometry.contact for f in session.features]) * best.scale
-    reach = max(f.reach for f in session.features) * best.scale
+    contacts = np.array([f.geometry.contact for f in touches.features]) * best.scale
+    reach = max(f.reach for f in touches.features) * best.scale
     kept = [np.concatenate([best.rotation, best.translation[:, None]], axis=1)]
     where = [contacts @ best.rotation.T + best.translation]
     for Rk, tk in zip(R, t):

@@ -95,12 +95,12 @@ class DistanceField:
         return int(self.index.nbytes + self.bricks.nbytes)
 
     def args(self) -> tuple:
-        """The arguments every kernel of :mod:`tactrec.engine.kernels` takes first."""
+        """The arguments every field kernel (:mod:`.field_kernels`, :mod:`tactrec.engine.kernels`) takes first."""
         return (self.index, self.bricks, self.origin, 1.0 / self.spacing, self.quantum, self.band, self.shift)
 
     def signed(self, points: np.ndarray) -> np.ndarray:
         """Signed, truncated distances of ``points (..., 3)``, shape ``(...)``."""
-        from ..engine.kernels import field_lookup
+        from .field_kernels import field_lookup
 
         p = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 3))
         return field_lookup(*self.args(), p).reshape(np.shape(points)[:-1])
@@ -118,7 +118,7 @@ class DistanceField:
 
     @classmethod
     def from_store(cls, arrays) -> "DistanceField":
-        from ..engine import BRICK
+        from .field_kernels import BRICK
 
         origin = np.ascontiguousarray(arrays["field_origin"], dtype=np.float64)
         spacing, truncation = float(arrays["field_spacing"]), float(arrays["field_truncation"])
@@ -160,7 +160,7 @@ def build_field(vertices: np.ndarray, faces: np.ndarray, *, mean_edge: float, sp
     signed distance minus ``offset``, kept within the band of that offset surface."""
     import igl
 
-    from ..engine import BRICK
+    from .field_kernels import BRICK
 
     h = float(spacing if spacing is not None else SPACING * mean_edge)
     truncation = band * h

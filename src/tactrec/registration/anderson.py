@@ -23,9 +23,12 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from .kernels import _cholesky_solve, _rodrigues
+from ..compiled import fork_safe
+from .step import _cholesky_solve, _rodrigues
 
 __all__ = ["anderson"]
+
+fork_safe()
 
 #: a relative turn this close to a half turn (radians) has no steady rotation vector: start afresh
 _HALF_TURN = np.pi - 1e-3
@@ -70,7 +73,7 @@ def _pose(R0, t0, u, reach, R, t):
 def _mix(U, G, n, gamma):
     """The least-squares weights ``gamma (n - 1,)`` of the last ``n`` residuals ``G - U`` (rows):
     ``min |f_last - dF gamma|`` by its normal equations (a relative ridge of 1e-10,
-    :func:`tactrec.engine.kernels._cholesky_solve`).  False where they are singular."""
+    :func:`tactrec.registration.step._cholesky_solve`).  False where they are singular."""
     p = n - 1
     dF = np.empty((p, 6))
     for j in range(p):
