@@ -219,42 +219,34 @@ def _stored_blob(model, tips=()) -> tuple[bytes, int]:
     return buffer.getvalue(), len(entry.table)
 
 
-def _start_builder(models: list, tips) -> None:
-    _BUILDER[:] = [models, tips]
-
-
-def _stored_in_worker(k: int) -> tuple[bytes, int]:
-    return _stored_blob(_BUILDER[0][k], _BUILDER[1])
-
-
-#: in a build's worker process only: the models it was forked with (set by the pool's initializer)
-_BUILDER: list = []
+def _stored_of(held: tuple, k: int) -> tuple[bytes, int]:
+    """:func:`_stored_blob` of model ``k`` of a build's worker, which holds ``(models, tips)``."""
+    models, tips = held
+    return _stored_blob(models[k], tips)
 
 
 def _stored(models: list, todo: list[int], *, quiet: bool, tips=()) -> list[tuple[bytes, int]]:
     """:func:`_stored_blob` of ``models[k]`` for each ``k`` of ``todo``, in order: in two forked
     worker processes when there are two or more (a scan's distance field and tables take a second or
     two each), else here."""
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
+    from .runner import Workers, can_fork
 
     bar = _progress(range(len(todo)), total=len(todo), desc="building", quiet=quiet)
     jobs = min(2, os.cpu_count() or 1, len(todo))
-    # not from inside another process's worker (a benchmark's): that pool already uses the cores
-    nested = multiprocessing.parent_process() is not None
-    if jobs < 2 or nested or "fork" not in multiprocessing.get_all_start_methods():
-        out = []
+    out = []
+    if jobs < 2 or not can_fork():
         for k in todo:
             out.append(_stored_blob(models[k], tips))
             bar.update()
         bar.close()
         return out
-    with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("fork"), initializer=_start_builder,
-                             initargs=(models, tips)) as pool:
-        out = []
-        for found in pool.map(_stored_in_worker, todo):
+    pool = Workers((models, tips), jobs)
+    try:
+        for found in pool.map(_stored_of, todo):
             out.append(found)
             bar.update()
+    finally:
+        pool.close()
     bar.close()
     return out
 

@@ -1,15 +1,20 @@
 """Where a recognition's per-model stages run: in this process, or dealt into fixed shares over
-worker processes forked with the models (:class:`~tactrec.recognition.Recognizer`'s ``runner``)."""
+worker processes forked with the models (:class:`~tactrec.recognition.Recognizer`'s ``runner``).
+
+:class:`Workers` is the one pool of the package: processes forked with what they hold (the models,
+passed to the process function, not kept in a global), each served over a pipe of its own.  A
+worker holds no end of any pipe but its own, so when the process that forked it dies, however it
+dies (SIGKILL, the OOM killer), its pipe closes and the worker exits with it.
+"""
 
 from __future__ import annotations
 
 import multiprocessing
+import multiprocessing.connection
 import os
-from concurrent.futures import ProcessPoolExecutor
-from concurrent.futures.process import BrokenProcessPool
-from typing import Sequence
+from typing import Callable, Iterable, Sequence
 
-__all__ = ["default_workers", "workers_for"]
+__all__ = ["default_workers", "workers_for", "can_fork", "Workers", "WorkerLost", "Held", "Serial", "Pool"]
 
 
 def default_workers() -> int:
@@ -23,7 +28,137 @@ def workers_for(models) -> int:
     return default_workers() if len(models) > 4 else 1
 
 
-class _Held:
+def can_fork() -> bool:
+    """Whether this process may fork workers: where ``fork`` exists, and not from inside another
+    process's worker (a benchmark running touches in parallel), where forking can deadlock and that
+    pool already uses the cores."""
+    return "fork" in multiprocessing.get_all_start_methods() and multiprocessing.parent_process() is None
+
+
+class WorkerLost(RuntimeError):
+    """A worker process ended before it answered (out of memory, killed)."""
+
+
+def _serve(state, conn, foreign, start) -> None:
+    """A worker's life: close the other pipes' ends inherited with the fork, run ``start()``, then
+    answer ``(fn, args)`` with ``fn(state, *args)`` until told to stop or the pipe closes."""
+    for other in foreign:
+        other.close()
+    if start is not None:
+        start()
+    while True:
+        try:
+            message = conn.recv()
+        except (EOFError, OSError):                 # the parent is gone
+            return
+        if message is None:
+            return
+        fn, args = message
+        try:
+            answer = ("ok", fn(state, *args))
+        except BaseException as exc:               # noqa: BLE001 -- the caller re-raises it
+            answer = ("error", exc)
+        try:
+            conn.send(answer)
+        except Exception as exc:                    # noqa: BLE001 -- an answer that does not pickle
+            conn.send(("error", RuntimeError(f"{type(exc).__name__}: {exc}")))
+
+
+class Workers:
+    """``count`` processes forked with ``state``, each running ``start()`` first (see the module text).
+
+    ``fn(state, *args)`` runs in a worker for each of the ``args`` given; exceptions are raised in
+    this process; a worker that ends unanswered raises :class:`WorkerLost`, and the pool is closed."""
+
+    def __init__(self, state, count: int, *, start: Callable[[], None] | None = None):
+        context = multiprocessing.get_context("fork")
+        self._pipes, self._processes = [], []
+        for _ in range(count):
+            mine, theirs = context.Pipe()
+            process = context.Process(target=_serve, args=(state, theirs, list(self._pipes) + [mine], start),
+                                      daemon=True)
+            process.start()
+            theirs.close()
+            self._pipes.append(mine)
+            self._processes.append(process)
+
+    def __len__(self) -> int:
+        return len(self._pipes)
+
+    @property
+    def pids(self) -> list[int]:
+        """The workers' process ids."""
+        return [p.pid for p in self._processes]
+
+    def _answer(self, k: int):
+        try:
+            status, value = self._pipes[k].recv()
+        except (EOFError, OSError):
+            self.close(timeout=0.5)
+            raise WorkerLost("a worker process ended before it answered") from None
+        if status == "error":
+            raise value
+        return value
+
+    def each(self, fn: Callable, args: Sequence[tuple]) -> list:
+        """``fn(state, *args[k])`` in worker ``k`` for each ``k`` (at most one per worker), all at once;
+        their answers in order."""
+        if len(args) > len(self._pipes):
+            raise ValueError(f"{len(args)} calls for {len(self._pipes)} workers")
+        try:
+            for pipe, a in zip(self._pipes, args):
+                pipe.send((fn, tuple(a)))
+        except (BrokenPipeError, OSError):
+            self.close(timeout=0.5)
+            raise WorkerLost("a worker process ended before it was asked") from None
+        return [self._answer(k) for k in range(len(args))]
+
+    def map(self, fn: Callable, items: Iterable) -> Iterable:
+        """``fn(state, item)`` for each of ``items``, each worker taking the next item when it is done;
+        the answers in the items' order, as they come."""
+        items = list(items)
+        if not self._pipes:
+            raise WorkerLost("the pool is closed")
+        busy: dict[int, int] = {}
+        answers: dict[int, object] = {}
+        following = 0
+        for k, item in enumerate(items):
+            if len(busy) == len(self._pipes):
+                done = next(iter(multiprocessing.connection.wait([self._pipes[w] for w in busy])))
+                w = self._pipes.index(done)
+                answers[busy.pop(w)] = self._answer(w)
+            w = next(w for w in range(len(self._pipes)) if w not in busy)
+            self._pipes[w].send((fn, (item,)))
+            busy[w] = k
+            while following in answers:
+                yield answers.pop(following)
+                following += 1
+        while busy:
+            done = next(iter(multiprocessing.connection.wait([self._pipes[w] for w in busy])))
+            w = self._pipes.index(done)
+            answers[busy.pop(w)] = self._answer(w)
+            while following in answers:
+                yield answers.pop(following)
+                following += 1
+
+    def close(self, timeout: float = 5.0) -> None:
+        """Tell the workers to stop and wait for them (``timeout`` seconds each, then end them)."""
+        for pipe in self._pipes:
+            try:
+                pipe.send(None)
+            except (BrokenPipeError, OSError):
+                pass
+        for process in self._processes:
+            process.join(timeout)
+            if process.is_alive():
+                process.terminate()
+                process.join(timeout)
+        for pipe in self._pipes:
+            pipe.close()
+        self._pipes, self._processes = [], []
+
+
+class Held:
     """The models a process holds, a cache the stages may keep per touch, and what they build once
     per model (``samples``)."""
 
@@ -33,10 +168,10 @@ class _Held:
         self.samples: dict = {}
 
 
-class _Serial:
+class Serial:
     """Runs a stage in this process."""
 
-    def __init__(self, held: _Held):
+    def __init__(self, held: Held):
         self.held = held
 
     def map(self, stage, indices, *args, items=None) -> list:
@@ -45,44 +180,39 @@ class _Serial:
         return stage(self.held, list(indices), *args, list(items))
 
 
-_WORKER: list = []            # in a worker process only: the models it was forked with (the pool's initializer)
-
-
-def _start_worker(held: _Held) -> None:
-    _WORKER[:] = [held]
+def _one_thread() -> None:
     from .engine import one_thread
 
     one_thread()                 # the processes share the cores; a kernel's own threads would only contend
 
 
-def _in_worker(stage, indices, *args) -> list:
-    return stage(_WORKER[0], indices, *args)
+def _stage(held: Held, stage, indices, args) -> list:
+    return stage(held, indices, *args)
 
 
-class _Pool:
+class Pool:
     """Runs a stage over the models dealt into fixed shares (every ``n``-th model of a call), one
-    share a worker process: the result does not depend on the number of workers or on scheduling.
+    share a worker process (:class:`Workers`): the result does not depend on the number of workers
+    or on scheduling.  Where a worker is lost (out of memory, say), it goes on in this process.
 
     Processes, not threads: the exact closest-point queries hold Python's global lock."""
 
-    def __init__(self, held: _Held, workers: int):
+    def __init__(self, held: Held, workers: int):
         self.held = held
         self.workers = workers
-        self.pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork"),
-                                        initializer=_start_worker, initargs=(held,))
+        self.pool: Workers | None = Workers(held, workers, start=_one_thread)
 
     def map(self, stage, indices, *args, items=None) -> list:
         indices = list(indices)
         if self.pool is None or len(indices) < 2:
-            return _Serial(self.held).map(stage, indices, *args, items=items)
+            return Serial(self.held).map(stage, indices, *args, items=items)
         n = self.workers
-        shares = [(indices[k::n],) + (() if items is None else (list(items)[k::n],)) for k in range(n)]
+        shares = [(indices[k::n], args + (() if items is None else (list(items)[k::n],))) for k in range(n)]
         try:
-            futures = [self.pool.submit(_in_worker, stage, share[0], *args, *share[1:]) for share in shares if share[0]]
-            parts = [f.result() for f in futures]
-        except BrokenProcessPool:                    # a worker died (e.g. out of memory): go on without
+            parts = self.pool.each(_stage, [(stage, share, a) for share, a in shares if share])
+        except WorkerLost:                           # a worker died (e.g. out of memory): go on without
             self.pool = None
-            return _Serial(self.held).map(stage, indices, *args, items=items)
+            return Serial(self.held).map(stage, indices, *args, items=items)
         out = [None] * len(indices)
         for k, part in enumerate(parts):
             out[k::self.workers] = part
@@ -90,5 +220,5 @@ class _Pool:
 
     def close(self) -> None:
         if self.pool is not None:
-            self.pool.shutdown()
+            self.pool.close()
             self.pool = None
