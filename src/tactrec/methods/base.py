@@ -12,7 +12,7 @@ results, through these hooks:
   runs a stage over the models in worker processes or in this one (on all
   models, or on a chosen few: ``among``);
 * :meth:`Method.refit` -- a search's registrations carried over to nearly the same touch (a few of
-  its points set aside or taken back: :func:`tactrec.outliers.judge_ends`).
+  its points set aside or taken back: :func:`tactrec.recognition.again.judge_ends`).
 
 A new method is its own module and one line in :data:`tactrec.methods.METHODS`.
 """
@@ -27,7 +27,7 @@ from ..errors import InputError
 
 __all__ = ["Config", "Method", "Runner", "SearchOutcome", "NOT_SEARCHED"]
 
-#: why a model left out of a search (``among``) has no registration
+#: why a model left out of a search (``among``) has no registration, as printed
 NOT_SEARCHED = "not among the models searched"
 
 

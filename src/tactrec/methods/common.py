@@ -25,6 +25,6 @@ def best_of_orientations(register: Callable[..., Registration], touch: Touch, na
                for sign, g in touch.sides]
     ok = [r for r in results if r.ok]
     if not ok:
-        return Registration.rejection(name, results[0].rejected, scale=touch.scale)
+        return Registration.unfitted(name, results[0].reason, results[0].outcome, scale=touch.scale)
     best = min(ok, key=lambda r: r.error)
     return dataclasses.replace(best, candidates=sum(r.candidates for r in results))

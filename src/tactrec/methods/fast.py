@@ -22,7 +22,7 @@ normal (each of its best seeds then set on a dense local grid of turns and
 shifts, which bridges the tilts' grid and the basin of the exact steps).
 A tier on a set of models is
 
-1. *cheap stage* (per model, :func:`_cheap`): the tier's new hypotheses are
+1. *cheap stage* (per model, :func:`cheap_stage`): the tier's new hypotheses are
    posed from frames (:func:`tactrec.registration.mesh_fast.frame_poses`) and
    take ``cheap_steps`` Gauss-Newton steps on exact distances from
    ``coarse_points`` points a curve (after the first, only the best eighth,
@@ -36,10 +36,10 @@ A tier on a set of models is
 2. *selection* (across models): a pose is refined when its cheap score lies
    within ``ratio`` x the best error so far (or the tier's best cheap score);
    the others are deferred, not dropped;
-3. *refinement* (per model, :func:`_refined`): ``iterations`` exact steps on
+3. *refinement* (per model, :func:`refine_stage`): ``iterations`` exact steps on
    three times the points, then two on all points for the model's best.
    Every refinement of more than one step extrapolates its steps from the
-   last ``history`` (Anderson acceleration, :mod:`tactrec.engine.anderson`):
+   last ``history`` (Anderson acceleration, :mod:`tactrec.registration.anderson`):
    on a scan's facets a plain step slides a weakly held pose a few per cent
    of the way to the fit, for a hundred steps.
 
@@ -128,101 +128,15 @@ import numpy as np
 
 from ..engine import LOOKUP_COST
 from ..linalg import clearly_less
-from ..probability import fit_limit
-from ..registration import closedform_fast, mesh_fast
-from ..registration.result import Registration
-from .base import NOT_SEARCHED, Config, SearchOutcome
-from .fast_stages import _cheap, _closed_form, _polished, _refined, field_stages, hop_cost, tier_span
+from ..registration import mesh_fast
+from ..registration.result import Outcome, Registration
+from .base import NOT_SEARCHED, SearchOutcome
+from .fast_config import TIERS, FastConfig, Tier
+from .fast_stages import (cheap_stage, closed_form_stage, field_stages, hop_cost, polish_stage, refine_stage,
+                          tier_span)
 from .fast_state import State, error_of, grid_leaders, tier_places
 
 __all__ = ["FastMethod", "FastConfig", "Tier", "TIERS", "tier_cost", "tier_places"]
-
-
-@dataclasses.dataclass(frozen=True)
-class Tier:
-    """One step of the schedule: the best ``places`` places per model and normal (None: every
-    vertex; with ``folded``, of the folded places alone, for a touch whose normals disagree across
-    scales), posed by their principal ``"frames"`` or at ``"all"`` 30-degree rotations, with the
-    normal as estimated or also ``tilt`` degrees off four ways; or every place at every rotation,
-    screened on the model's distance field (``"field"``: :mod:`tactrec.engine.screen`), with the
-    data's normals or, for ``tilt > 0``, with normals tilted every ``tilt_step`` degrees out to
-    ``tilt`` (:func:`tactrec.engine.screen.tilted_normals`)."""
-
-    places: int | None
-    rotations: str = "frames"
-    tilt: float = 0.0
-    folded: bool = False
-
-    def __post_init__(self):
-        if self.places is not None and (not isinstance(self.places, int) or self.places < 1):
-            raise ValueError(f"a tier's places must be a whole number >= 1 or None, got {self.places!r}")
-        if self.rotations not in ("frames", "all", "field"):
-            raise ValueError(f"a tier's rotations are 'frames', 'all' or 'field', got {self.rotations!r}")
-        if not 0.0 <= self.tilt < 90.0:
-            raise ValueError(f"a tier's tilt is in [0, 90) degrees, got {self.tilt!r}")
-        if self.folded and self.rotations != "field":
-            raise ValueError("a tier of folded places is a field tier")
-
-
-#: the default schedule, coarse to fine
-TIERS = (Tier(500, "field"), Tier(500, "field", folded=True), Tier(24), Tier(None, "field"),
-         Tier(None, "field", 60.0))
-#: the exhaustive reference: every vertex, every 30 degrees
-EXHAUSTIVE = (Tier(None, "all"),)
-
-
-@dataclasses.dataclass(frozen=True)
-class FastConfig(Config):
-    """Options of the ``fast`` method (see the module text)."""
-
-    tiers: tuple = TIERS
-    budget: int = 300_000
-    spread: float = 4.0
-    coarse_points: int = 5
-    cheap_steps: int = 2
-    screen: int = 96
-    refine: int = 8
-    ratio: float = 3.0
-    iterations: int = 20
-    polish: int = 3
-    polish_iterations: int = 10
-    umbilic: float = 0.05
-    floor: float = 1e-3
-    within: float = 3.0
-    tolerance: float = 1e-5
-    history: int = 3
-    candidates: int = closedform_fast.DEFAULTS["candidates"]
-    screen_step: float = 0.17
-    screen_stages: tuple = ((36, 2, 0.05), (72, 4, 1.0))
-    screen_keep: int = 96
-    field_steps: int = 6
-    tilt_step: float = 20.0
-    hop_seeds: int = 2
-    hop_steps: int = 3
-    hop_angle: float = 3.0
-    hop_shift: float = 0.02
-
-    def __post_init__(self):
-        tiers = tuple(self.tiers)
-        object.__setattr__(self, "tiers", tiers)
-        self._check("tiers", len(tiers) > 0 and all(isinstance(t, Tier) for t in tiers), "a non-empty tuple of Tier")
-        for name in ("budget", "coarse_points", "cheap_steps", "screen", "refine", "iterations", "polish",
-                     "polish_iterations", "candidates", "field_steps", "history", "hop_seeds", "hop_steps"):
-            value = getattr(self, name)
-            least = 0 if name in ("polish", "history") else 1
-            self._check(name, isinstance(value, (int, np.integer)) and value >= least, f"a whole number >= {least}")
-        self._check("coarse_points", self.coarse_points >= 3, "at least 3")
-        for name in ("spread", "ratio", "umbilic", "floor", "within", "tolerance", "hop_angle", "hop_shift"):
-            self._check(name, np.isfinite(getattr(self, name)) and getattr(self, name) > 0, "a positive number")
-        self._check("ratio", self.ratio >= 1.0, "at least 1")
-        stages = tuple((int(r), int(p), float(f)) for r, p, f in self.screen_stages)
-        object.__setattr__(self, "screen_stages", stages)
-        self._check("screen_stages", len(stages) > 0 and all(r >= 1 and p >= 2 and 0 < f <= 1 for r, p, f in stages),
-                    "a non-empty tuple of (rotations >= 1, points a curve >= 2, share kept in (0, 1])")
-        self._check("screen_step", np.isfinite(self.screen_step) and self.screen_step > 0, "a positive number")
-        self._check("tilt_step", np.isfinite(self.tilt_step) and 0 < self.tilt_step < 90, "in (0, 90) degrees")
-        self._check("screen_keep", isinstance(self.screen_keep, (int, np.integer)) and self.screen_keep >= 1,
-                    "a whole number >= 1")
 
 
 # ---------------------------------------------------------------------- the search
@@ -258,6 +172,7 @@ def tier_cost(config: FastConfig, k: int, signs: int, places: int, curves: int =
     return int(cheap + config.refine * config.iterations * curves * 3 * config.coarse_points)
 
 
+# a twin of methods/paper.py's PaperMethod by design: both are the hooks of the Method protocol (.base)
 class FastMethod:
     """The ``fast`` method (see the module text)."""
 
@@ -267,9 +182,6 @@ class FastMethod:
     Config = FastConfig
 
     def configure(self, **options) -> FastConfig:
-        if options.get("exhaustive"):
-            options = dict(options, tiers=EXHAUSTIVE)
-        options.pop("exhaustive", None)
         return FastConfig.from_options(self.name, options)
 
     def prepare(self, model) -> None:
@@ -282,12 +194,12 @@ class FastMethod:
         others = [i for i in chosen if models[i].model.kind != "mesh"]
         state = State(touch, models, meshes, config)
         work, settled, depth = 0, False, 0
-        for i, found in zip(others, runner.map(_closed_form, others, touch, config)):
-            state.best[i], work = found["registration"], work + found["queries"]
+        for i, found in zip(others, runner.map(closed_form_stage, others, touch, config)):
+            state.best[i], work = found.registration, work + found.queries
         signs = len(touch.orientations)
         share = len(touch.points) / len(touch.joint_points)
         polish = config.polish * config.polish_iterations * len(touch.points)        # the final polish's work
-        hop = hop_cost(config, len(touch.curves), len(touch.joint_points))          # one model's _hopped
+        hop = hop_cost(config, len(touch.curves), len(touch.joint_points))          # one model's hopped
         allowed = config.budget * len(chosen) * signs
         allowed = allowed if budget is None else min(allowed, budget)
         fine = bool(meshes) and state.noise_free
@@ -323,8 +235,9 @@ class FastMethod:
             grids += grid_leaders(state, meshes, runner, room, grids, config.polish)
             settled = settled or state.settled()
         top = [i for i in sorted(state.best, key=lambda i: (state.error(i), i)) if state.best[i].ok][:config.polish]
-        for i, found in zip(top, runner.map(_polished, top, touch, config, False, items=[state.best[i] for i in top])):
-            state.best[i], work = found["registration"], work + found["queries"]
+        polished = runner.map(polish_stage, top, touch, config, False, items=[state.best[i] for i in top])
+        for i, found in zip(top, polished):
+            state.best[i], work = found.registration, work + found.queries
         return SearchOutcome(self._ranking(state, models), settled, int(work + grids), depth, int(allowed))
 
     def refit(self, touch, models, config: FastConfig, runner, outcome: SearchOutcome) -> SearchOutcome:
@@ -334,38 +247,37 @@ class FastMethod:
         ranking = list(outcome.ranking)
         ok = [i for i, r in enumerate(ranking) if r.ok]
         work = 0
-        for i, found in zip(ok, runner.map(_polished, ok, touch, config, True, items=[ranking[i] for i in ok])):
-            ranking[i], work = found["registration"], work + found["queries"]
+        for i, found in zip(ok, runner.map(polish_stage, ok, touch, config, True, items=[ranking[i] for i in ok])):
+            ranking[i], work = found.registration, work + found.queries
         return dataclasses.replace(outcome, ranking=ranking, work=int(outcome.work + work))
 
     @staticmethod
     def _tier(state: State, group: list[int], k: int, runner) -> int:
         """Tier ``k`` on the models of ``group``: cheap stage, selection, refinement.  Returns the work."""
         touch, config = state.touch, state.config
-        cheap = dict(zip(group, runner.map(_cheap, group, touch, config, k)))
-        work = sum(c["queries"] for c in cheap.values())
+        cheap = dict(zip(group, runner.map(cheap_stage, group, touch, config, k)))
+        work = sum(c.queries for c in cheap.values())
+        posed = {i: c.poses for i, c in cheap.items() if c.outcome is Outcome.FITTED}
         for i, c in cheap.items():
             state.next[i] = k + 1
-            state.tried[i] += c.get("places", 0)
-            if "rejected" in c:
-                state.rejected[i] = c["rejected"]
-            elif "score" in c:
-                state.cheapest[i] = min(state.cheapest[i], float(c["score"][0]))
+            state.tried[i] += c.places
+            if c.outcome is Outcome.REJECTED:
+                state.rejected[i] = c.reason
+        for i, poses in posed.items():
+            state.cheapest[i] = min(state.cheapest[i], float(poses.score[0]))
         _, e1 = state.leader()
-        c_best = min((float(c["score"][0]) for c in cheap.values() if "score" in c), default=np.inf)
+        c_best = min((float(poses.score[0]) for poses in posed.values()), default=np.inf)
         bound = config.ratio * max(min(e1, c_best), state.limit)
-        chosen = {i: {key: c[key][c["score"] <= bound] for key in ("R", "t", "score", "sign")}
-                  for i, c in cheap.items() if "score" in c and c["score"][0] <= bound}
-        for i, c in cheap.items():
-            score = c.get("score", np.empty(0))
-            left = score[score > bound]
+        chosen = {i: poses.within(bound) for i, poses in posed.items() if poses.score[0] <= bound}
+        for i, poses in posed.items():
+            left = poses.score[poses.score > bound]
             if len(left):
                 state.deferred[i] = min(state.deferred[i], float(left[0]))
         order = sorted(chosen)
-        for i, found in zip(order, runner.map(_refined, order, touch, config, items=[chosen[i] for i in order])):
-            work += found["queries"]
-            if clearly_less(error_of(found["registration"]), state.error(i)):
-                state.best[i] = found["registration"]
+        for i, found in zip(order, runner.map(refine_stage, order, touch, config, items=[chosen[i] for i in order])):
+            work += found.queries
+            if clearly_less(error_of(found.registration), state.error(i)):
+                state.best[i] = found.registration
         return work
 
     @staticmethod
@@ -376,11 +288,11 @@ class FastMethod:
                 r = state.best[i]
                 ranking.append(dataclasses.replace(r, candidates=state.tried[i]) if i in state.tried else r)
             elif i in state.rejected:
-                ranking.append(Registration.rejection(entry.name, state.rejected[i]))
+                ranking.append(Registration.unfitted(entry.name, state.rejected[i]))
             elif i not in state.cheapest:
-                ranking.append(Registration.rejection(entry.name, NOT_SEARCHED))
+                ranking.append(Registration.unfitted(entry.name, NOT_SEARCHED, Outcome.NOT_SEARCHED))
             else:
-                ranking.append(Registration.rejection(
+                ranking.append(Registration.unfitted(
                     entry.name, f"deferred: its best cheap score {state.cheapest[i]:.3g} stayed beyond "
-                    f"{state.config.ratio:g} x the best error", cheap=state.cheapest[i], deferred=True))
+                    f"{state.config.ratio:g} x the best error", Outcome.DEFERRED, cheap=state.cheapest[i]))
         return ranking

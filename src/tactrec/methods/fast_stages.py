@@ -1,8 +1,8 @@
 """Method ``fast``'s stages, run per model in worker processes (see :mod:`tactrec.methods.fast`).
 
-Step 1, the cheap stage (:func:`_cheap`); step 3, refinement (:func:`_refined`); the final polish
-(:func:`_polished`, which also refits a search's registrations on a touch of nearly the same
-points); and closed-form surfaces (:func:`_closed_form`).
+Step 1, the cheap stage (:func:`cheap_stage`); step 3, refinement (:func:`refine_stage`); the final polish
+(:func:`polish_stage`, which also refits a search's registrations on a touch of nearly the same
+points); and closed-form surfaces (:func:`closed_form_stage`).
 
 A touch with a round tip follows the one rule of :mod:`tactrec.tip`: the places, the field screen,
 its field steps and local grid take the mesh and the touch as the search sees them
@@ -21,16 +21,53 @@ import numpy as np
 from ..engine import LOOKUP_COST
 from ..linalg import stable_order
 from ..registration import closedform_fast, mesh_fast
-from ..registration.result import Registration
+from ..registration.result import Outcome, Registration
 from ..registration.solver import Criteria, mean_distance, solve
 from .common import best_of_orientations, in_model_units
 
 if TYPE_CHECKING:
     from .fast import FastConfig
 
-__all__ = ["tier_span", "field_stages"]
+__all__ = ["tier_span", "field_stages", "Poses", "Cheap", "Found"]
 
-def _offset_of(model) -> float:
+
+@dataclasses.dataclass(frozen=True)
+class Poses:
+    """Poses of one model, best first: ``R (k, 3, 3), t (k, 3)`` (data onto model), their cheap scores
+    ``score (k,)`` (data units) and the side of the normal each was posed from, ``sign (k,)``."""
+
+    R: np.ndarray
+    t: np.ndarray
+    score: np.ndarray
+    sign: np.ndarray
+
+    def within(self, bound: float) -> "Poses":
+        """The poses whose score is at most ``bound``."""
+        keep = self.score <= bound
+        return Poses(self.R[keep], self.t[keep], self.score[keep], self.sign[keep])
+
+
+@dataclasses.dataclass(frozen=True)
+class Cheap:
+    """Step 1 of a tier on one model (:func:`cheap_stage`): its best poses (``outcome`` fitted), why it is
+    ruled out (rejected, ``reason``), or nothing new to pose (not searched: every place of a field
+    tier was screened by earlier tiers); the closest-point queries and the places it tried."""
+
+    outcome: Outcome
+    queries: int
+    places: int = 0
+    poses: Poses | None = None
+    reason: str = ""
+
+
+@dataclasses.dataclass(frozen=True)
+class Found:
+    """A stage's registration of one model and the closest-point queries it made."""
+
+    registration: Registration
+    queries: int
+
+def offset_of(model) -> float:
     """The radius a mesh as the search sees it is offset by (0: the mesh itself): part of a cache key,
     as a touch's centres searched with a tip have the key of the same points without one."""
     from ..surfaces.mesh_offset import OffsetMesh
@@ -38,12 +75,12 @@ def _offset_of(model) -> float:
     return model.radius if isinstance(model, OffsetMesh) else 0.0
 
 
-def _gaps(held, index: int, model, touch, g, sign: int):
+def touch_gaps(held, index: int, model, touch, g, sign: int):
     """Each vertex's curvature gap to ``touch`` and the touch's fit
     (:func:`~tactrec.registration.mesh_fast.curvature_gaps`) on ``model`` (the mesh of entry ``index``
     as the search sees it: :meth:`~tactrec.features.Touch.searched`), for its estimate ``g`` on side
     ``sign``, computed once per touch."""
-    key = (touch.key, index, _offset_of(model), sign)
+    key = (touch.key, index, offset_of(model), sign)
     if key not in held.cache:
         if len(held.cache) > 8 * len(held.entries) + 8:           # another touch: forget the last one's
             held.cache.clear()
@@ -51,18 +88,18 @@ def _gaps(held, index: int, model, touch, g, sign: int):
     return held.cache[key]
 
 
-def _places(held, index: int, model, touch, g, sign: int, config: FastConfig, kind: str,
+def ranked_places(held, index: int, model, touch, g, sign: int, config: FastConfig, kind: str,
             count: int | None) -> np.ndarray:
-    """The first ``count`` places of ``model`` (None: all) in order of curvature gap (:func:`_gaps`),
+    """The first ``count`` places of ``model`` (None: all) in order of curvature gap (:func:`touch_gaps`),
     maybe a few more: of ``kind`` ``"every"``, every vertex; ``"cells"``, the best vertex of each
     grid cell ``radius / spread`` across (:func:`~tactrec.registration.mesh_fast.first_per_cell`);
     ``"screen"``, the field screen's places (:func:`tactrec.engine.screen.screen_places`);
     ``"folded"``, the folded ones alone (which the order's start cannot tell: a cell is folded by
     any of its vertices).  Kept for the touch, and extended when a later tier takes more."""
-    key = (touch.key, index, _offset_of(model), sign, kind)
+    key = (touch.key, index, offset_of(model), sign, kind)
     found, complete = held.cache.get(key, (None, False))
     if found is None or not (complete or (count is not None and len(found) >= count)):
-        gaps, _ = _gaps(held, index, model, touch, g, sign)
+        gaps, _ = touch_gaps(held, index, model, touch, g, sign)
         if kind == "every":
             def thin(order):
                 return order
@@ -100,7 +137,7 @@ def field_stages(config: FastConfig, tier) -> tuple:
     return (turns, *config.screen_stages[0][1:]), (2 * turns, *config.screen_stages[-1][1:])
 
 
-def _field_poses(model, s, g, sign: int, spots: np.ndarray, fit, tier, config: FastConfig, context, exact, x):
+def field_poses(model, s, g, sign: int, spots: np.ndarray, fit, tier, config: FastConfig, context, exact, x):
     """A field tier's hypotheses at the places ``spots``: screened on the field with the data's normals
     (or, in a tilted tier, with normals tilted out to ``tier.tilt`` degrees, then each of the best
     few set on a dense local grid: :func:`tactrec.engine.screen.local_screen`), the best
@@ -143,7 +180,7 @@ def _field_poses(model, s, g, sign: int, spots: np.ndarray, fit, tier, config: F
     return R, tr, score, int(lookups * LOOKUP_COST) + q, tried
 
 
-def _cheap(held, indices, touch, config: FastConfig, k: int) -> list[dict]:
+def cheap_stage(held, indices, touch, config: FastConfig, k: int) -> list[Cheap]:
     """Step 1 of tier ``k`` on each mesh model: its best ``refine`` poses and their cheap scores."""
     tier = config.tiers[k]
     out = []
@@ -151,29 +188,29 @@ def _cheap(held, indices, touch, config: FastConfig, k: int) -> list[dict]:
         model = held.entries[index].model
         t = in_model_units(touch, model)
         if t.radius > model.size or t.joint_reach > model.size:
-            out.append({"rejected": "the touch is larger than the model", "queries": 0})
+            out.append(Cheap(Outcome.REJECTED, 0, reason="the touch is larger than the model"))
             continue
         x, screened = t.joint_subset(config.coarse_points), t.screen_subset(config.coarse_points)
         exact, exact_screened = t.exact(model, config.coarse_points), t.exact(model, config.coarse_points, screen=True)
         poses, queries, tried = [], 0, 0
         for sign, _ in t.sides:
             seen, s, g = t.searched(model, sign)                 # (a) of tactrec.tip
-            _, fit = _gaps(held, index, seen, s, g, sign)
+            _, fit = touch_gaps(held, index, seen, s, g, sign)
             start, stop = tier_span(config.tiers, k)
             if tier.rotations == "field":
                 # a folded tier reaches here only for a touch whose normals disagree (FastMethod.search)
                 kind = "folded" if tier.folded else "screen"
-                spots = _places(held, index, seen, s, g, sign, config, kind, stop)[start:stop]
+                spots = ranked_places(held, index, seen, s, g, sign, config, kind, stop)[start:stop]
                 if len(spots) == 0:
                     continue
                 context_middles = s.screen_subset(config.coarse_points)[len(s.subset(config.coarse_points)):] \
                     if t.context else None
-                R, tr, score, q, n = _field_poses(seen, s, g, sign, spots, fit, tier, config, context_middles, exact, x)
+                R, tr, score, q, n = field_poses(seen, s, g, sign, spots, fit, tier, config, context_middles, exact, x)
                 tried, queries = tried + n, queries + q
                 poses.append((R, tr, score, np.full(len(R), sign)))
                 continue
             # a tier of every place (the exhaustive reference) takes every vertex, not one a cell
-            chosen = _places(held, index, seen, s, g, sign, config, "every" if stop is None else "cells", stop)
+            chosen = ranked_places(held, index, seen, s, g, sign, config, "every" if stop is None else "cells", stop)
             for lo in range(start, len(chosen) if stop is None else min(stop, len(chosen)), 1000):
                 part = chosen[lo:min(lo + 1000, len(chosen) if stop is None else stop)]
                 tried += len(part)
@@ -192,32 +229,32 @@ def _cheap(held, indices, touch, config: FastConfig, k: int) -> list[dict]:
                 best = order[np.r_[True, owner[order][1:] != owner[order][:-1]]]
                 poses.append((R[best], tr[best], score[best], np.full(len(best), sign)))
         if not poses and tier.rotations == "field":          # every place screened by earlier tiers
-            out.append({"queries": int(queries), "places": tried})
+            out.append(Cheap(Outcome.NOT_SEARCHED, int(queries), tried))
             continue
         if not poses:
-            out.append({"rejected": "no place to start from", "queries": queries, "places": tried})
+            out.append(Cheap(Outcome.REJECTED, int(queries), tried, reason="no place to start from"))
             continue
         R, tr, score, signs = (np.concatenate([p[i] for p in poses]) for i in range(4))
         keep = stable_order(score)[:config.refine]
-        out.append({"R": R[keep], "t": tr[keep], "score": score[keep] / t.scale, "sign": signs[keep],
-                    "queries": int(queries), "places": tried})
+        out.append(Cheap(Outcome.FITTED, int(queries), tried, Poses(R[keep], tr[keep], score[keep] / t.scale,
+                                                                       signs[keep])))
     return out
 
 
-def _registration(model, touch, R: np.ndarray, t: np.ndarray, error: float, sign: int) -> Registration:
+def mesh_registration(model, touch, R: np.ndarray, t: np.ndarray, error: float, sign: int) -> Registration:
     """The registration of pose ``R (3, 3), t (3,)`` on a mesh, with the normal of sign ``sign`` (its
     spread measured against the model offset by the touch's tip)."""
     return mesh_fast.registration(touch.exact(model), touch.oriented(sign), R, t, error, candidates=0, sign=sign, scale=touch.scale,
                                   x=touch.joint_points)
 
 
-def _refined(held, indices, touch, config: FastConfig, chosen: list[dict]) -> list[dict]:
+def refine_stage(held, indices, touch, config: FastConfig, chosen: list[Poses]) -> list[Found]:
     """Step 3 on each model: the chosen poses refined on exact distances; the best as a registration."""
     out = []
     for index, poses in zip(indices, chosen):
         model = held.entries[index].model
         t = in_model_units(touch, model)
-        R, tr, error, q1 = solve(t.exact(model, 3 * config.coarse_points), poses["R"], poses["t"],
+        R, tr, error, q1 = solve(t.exact(model, 3 * config.coarse_points), poses.R, poses.t,
                                  t.joint_subset(3 * config.coarse_points),
                                  Criteria(config.iterations, tolerance=config.tolerance, history=config.history))
         order = stable_order(error)
@@ -225,12 +262,13 @@ def _refined(held, indices, touch, config: FastConfig, chosen: list[dict]) -> li
         others = np.concatenate([R[order], tr[order][:, :, None]], axis=2)                 # (k, 3, 4), best first
         R, tr, error, q2 = solve(t.exact(model), R[b:b + 1], tr[b:b + 1], t.joint_points,
                                  Criteria(2, tolerance=config.tolerance, history=config.history))
-        found = _registration(model, t, R[0], tr[0], error[0], int(poses["sign"][b]))
-        out.append({"registration": dataclasses.replace(found, alternatives=others), "queries": q1 + q2})
+        found = mesh_registration(model, t, R[0], tr[0], error[0], int(poses.sign[b]))
+        out.append(Found(dataclasses.replace(found, alternatives=others), q1 + q2))
     return out
 
 
-def _polished(held, indices, touch, config: FastConfig, fresh: bool, registrations: list[Registration]) -> list[dict]:
+def polish_stage(held, indices, touch, config: FastConfig, fresh: bool,
+                 registrations: list[Registration]) -> list[Found]:
     """The registrations refined further on all points: ``polish_iterations`` exact steps from their
     poses, kept only where they lower the error.  With ``fresh``, they come from a search of nearly
     the same points (the same touch, a few of its points set aside or taken back:
@@ -245,7 +283,7 @@ def _polished(held, indices, touch, config: FastConfig, fresh: bool, registratio
             R, tr, error, q = solve(exact, r.rotation[None], r.translation[None], t.joint_points,
                                     Criteria(config.polish_iterations, tolerance=config.tolerance,
                                              history=config.history))
-            better = dataclasses.replace(_registration(model, t, R[0], tr[0], error[0], r.normal_sign),
+            better = dataclasses.replace(mesh_registration(model, t, R[0], tr[0], error[0], r.normal_sign),
                                          alternatives=r.alternatives) if fresh or error[0] < r.error else r
         else:
             start = dataclasses.replace(r, error=float(mean_distance(exact, r.rotation[None], r.translation[None],
@@ -256,12 +294,12 @@ def _polished(held, indices, touch, config: FastConfig, fresh: bool, registratio
             q = (config.polish_iterations + int(fresh)) * len(t.joint_points)
         if fresh:
             better = dataclasses.replace(better, alternatives=r.alternatives, candidates=r.candidates)
-        out.append({"registration": better, "queries": q})
+        out.append(Found(better, q))
     return out
 
 
 def hop_cost(config: FastConfig, curves: int, points: int) -> int:
-    """The closest-point queries of :func:`_hopped` on one model: ``hop_seeds`` grids of
+    """The closest-point queries of :func:`hop_stage` on one model: ``hop_seeds`` grids of
     ``hop_steps**6`` poses, each two steps on ``coarse_points`` points a curve; the best ``2 refine``
     ``iterations`` steps on three times those points, and the best of them as many on all ``points``."""
     grid = config.hop_seeds * config.hop_steps ** 6
@@ -269,7 +307,7 @@ def hop_cost(config: FastConfig, curves: int, points: int) -> int:
     return int(2 * grid * config.coarse_points * curves + config.iterations * (refine + points))
 
 
-def _hopped(held, indices, touch, config: FastConfig, items: list[tuple[Registration, float]]) -> list[dict]:
+def hop_stage(held, indices, touch, config: FastConfig, items: list[tuple[Registration, float]]) -> list[Found]:
     """The registrations ``items`` beyond the fit limit, each with its grid's span, searched again
     about its pose and its best alternatives (``hop_seeds`` in all): a grid of turns and shifts about
     the contact's image (:func:`tactrec.engine.screen.local_poses`, ``hop_steps`` values of each of
@@ -303,13 +341,13 @@ def _hopped(held, indices, touch, config: FastConfig, items: list[tuple[Registra
         R, tr, error, q3 = solve(t.exact(model), R[b:b + 1], tr[b:b + 1], t.joint_points, steps)
         better = r
         if error[0] < r.error:
-            better = dataclasses.replace(_registration(model, t, R[0], tr[0], error[0], r.normal_sign),
+            better = dataclasses.replace(mesh_registration(model, t, R[0], tr[0], error[0], r.normal_sign),
                                          alternatives=r.alternatives, candidates=r.candidates)
-        out.append({"registration": better, "queries": q1 + q2 + q3})
+        out.append(Found(better, q1 + q2 + q3))
     return out
 
 
-def _closed_form(held, indices, touch, config: FastConfig) -> list[dict]:
+def closed_form_stage(held, indices, touch, config: FastConfig) -> list[Found]:
     """Closed-form surfaces: the nearest table rows, refined in six degrees of freedom."""
     out = []
     for index in indices:
@@ -318,5 +356,5 @@ def _closed_form(held, indices, touch, config: FastConfig) -> list[dict]:
         r = best_of_orientations(lambda g, sign: closedform_fast.register(
             entry.model, entry.table, g, t.joint_points, candidates=config.candidates, exact=t.exact(entry.model),
             surface=t.on_surface(sign).joint_points), t, entry.model.name)
-        out.append({"registration": r, "queries": config.candidates * 12 * len(t.joint_points)})
+        out.append(Found(r, config.candidates * 12 * len(t.joint_points)))
     return out

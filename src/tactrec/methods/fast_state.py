@@ -9,7 +9,7 @@ from ..linalg import clearly_less
 from ..probability import fit_limit, fit_standard_error, noise_fit, resolution
 from ..registration.result import Registration
 from .common import in_model_units
-from .fast_stages import _hopped, _polished, tier_span
+from .fast_stages import hop_stage, polish_stage, tier_span
 
 __all__ = ["State", "error_of", "grid_leaders", "tier_places"]
 
@@ -136,8 +136,8 @@ class State:
 def grid_leaders(state: State, meshes: list[int], runner, room, work: int, models: int) -> int:
     """While the best pose lies beyond a plausible fit (:attr:`State.plausible`), the leading poses
     (within ``ratio`` of the best, the ``models`` best models), each first polished (the final
-    polish's steps, :func:`~.fast_stages._polished`), then searched again about themselves
-    (:func:`~.fast_stages._hopped`) as far as ``room(work)`` grids go: a round that finds nothing
+    polish's steps, :func:`~.fast_stages.polish_stage`), then searched again about themselves
+    (:func:`~.fast_stages.hop_stage`) as far as ``room(work)`` grids go: a round that finds nothing
     better ends that pose's grid (its nodes' basins cover its span, and a finer grid covers less);
     one that lowers the error but not by half halves the grid; three rounds a pose at the most.  A
     pose a tier finds later takes a grid of its own.  Returns the work."""
@@ -152,9 +152,9 @@ def grid_leaders(state: State, meshes: list[int], runner, room, work: int, model
         # a new pose first takes the final polish's steps on all points: a tier's refinement
         # ends a step or two short of a fit the polish reaches
         items = [state.best[i] for i in new]
-        for i, found in zip(new, runner.map(_polished, new, state.touch, config, False, items=items)):
-            spent += found["queries"]
-            state.best[i] = found["registration"]
+        for i, found in zip(new, runner.map(polish_stage, new, state.touch, config, False, items=items)):
+            spent += found.queries
+            state.best[i] = found.registration
             state.grids[i] = (state.best[i], 1.0, 0)                          # about a pose, its span, rounds
         _, e1 = state.leader()
         if new and not e1 > state.plausible:
@@ -163,13 +163,13 @@ def grid_leaders(state: State, meshes: list[int], runner, room, work: int, model
         if not near:
             break
         items = [state.grids[i][:2] for i in near]
-        for i, found in zip(near, runner.map(_hopped, near, state.touch, config, items=items)):
-            spent += found["queries"]
+        for i, found in zip(near, runner.map(hop_stage, near, state.touch, config, items=items)):
+            spent += found.queries
             before, (_, span, rounds) = state.error(i), state.grids[i]
-            if not clearly_less(error_of(found["registration"]), before):
+            if not clearly_less(error_of(found.registration), before):
                 state.grids[i] = (state.best[i], span, 3)
                 continue
-            state.best[i] = found["registration"]
+            state.best[i] = found.registration
             halved = error_of(state.best[i]) <= 0.5 * before
             state.grids[i] = (state.best[i], span if halved else span / 2, rounds + 1)
     return spent

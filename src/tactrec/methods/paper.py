@@ -36,7 +36,7 @@ import dataclasses
 
 from ..estimation import estimate
 from ..registration import closedform_paper, mesh_paper
-from ..registration.result import Registration
+from ..registration.result import Outcome, Registration
 from .base import NOT_SEARCHED, Config, SearchOutcome
 from .common import best_of_orientations, in_model_units
 
@@ -104,6 +104,7 @@ def _stage(held, indices, touch, config) -> list[Registration]:
     return [_register(held.entries[i], touch, config) for i in indices]
 
 
+# a twin of methods/fast.py's FastMethod by design: both are the hooks of the Method protocol (.base)
 class PaperMethod:
     """The paper's method (see the module text)."""
 
@@ -125,12 +126,13 @@ class PaperMethod:
             touch = touch.with_estimate(own)
         chosen = range(len(models)) if among is None else sorted(among)
         found = dict(zip(chosen, runner.map(_stage, chosen, touch, config)))
-        return SearchOutcome([found[i] if i in found else Registration.rejection(e.name, NOT_SEARCHED)
+        return SearchOutcome([found[i] if i in found
+                              else Registration.unfitted(e.name, NOT_SEARCHED, Outcome.NOT_SEARCHED)
                               for i, e in enumerate(models)])
 
     def refit(self, touch, models, config: PaperConfig, runner, outcome: SearchOutcome) -> SearchOutcome:
         """The paper's registration has no step that starts from a given pose: ``touch`` is searched
         in full again, on the models ``outcome`` searched, its work added."""
-        among = [i for i, r in enumerate(outcome.ranking) if r.rejected != NOT_SEARCHED]
+        among = [i for i, r in enumerate(outcome.ranking) if r.outcome is not Outcome.NOT_SEARCHED]
         again = self.search(touch, models, config, runner, among=among)
         return dataclasses.replace(again, work=again.work + outcome.work)

@@ -11,6 +11,6 @@ Which of them a recognition uses is the method's choice (:mod:`tactrec.methods`)
 
 from __future__ import annotations
 
-from .result import Registration, local_frame
+from .result import Outcome, Registration, local_frame
 
-__all__ = ["Registration", "local_frame"]
+__all__ = ["Registration", "Outcome", "local_frame"]

@@ -71,11 +71,11 @@ def register(model: ClosedFormSurface, table: CurvatureTable, geometry: LocalGeo
     first turn."""
     idx, _ = table.nearest(geometry.k1, geometry.k2, candidates)
     if len(idx) == 0:
-        return Registration.rejection(model.name, "empty table")
+        return Registration.unfitted(model.name, "empty table")
     x = np.asarray(points, dtype=np.float64)
     on = x if surface is None else np.asarray(surface, dtype=np.float64)
     if np.max(np.linalg.norm(on - geometry.contact, axis=1)) > model.size:
-        return Registration.rejection(model.name, "the touch is larger than the model")
+        return Registration.unfitted(model.name, "the touch is larger than the model")
     L = local_frame(geometry.normal, geometry.directions[0])
     problem = Superposition(model, (on - geometry.contact) @ L.T)
     uv0 = table.samples.sites[idx]
@@ -83,7 +83,7 @@ def register(model: ClosedFormSurface, table: CurvatureTable, geometry: LocalGeo
     jet = model.frame_jet(uv0[:, 0], uv0[:, 1])
     usable = np.isfinite(E0) & np.all(np.isfinite(jet.frame), axis=(1, 2))
     if not usable.any():
-        return Registration.rejection(model.name, "registration failed")
+        return Registration.unfitted(model.name, "registration failed")
     uv0, phi0 = uv0[usable], phi0[usable]
     R = jet.frame[usable] @ rotations_z(phi0) @ L
     t = jet.point[usable] - np.einsum("hij,j->hi", R, geometry.contact)
@@ -94,7 +94,7 @@ def register(model: ClosedFormSurface, table: CurvatureTable, geometry: LocalGeo
         found = _result(model, geometry, R[b], t[b], error[b], uv0[b], len(idx))
         if found is not None:
             return found
-    return Registration.rejection(model.name, "registration failed")
+    return Registration.unfitted(model.name, "registration failed")
 
 
 def polish(model: ClosedFormSurface, registration: Registration, geometry: LocalGeometry, points: np.ndarray, *,

@@ -222,7 +222,7 @@ def register(model: ClosedFormSurface, table: CurvatureTable, geometry: LocalGeo
     """
     idx = table.candidates(geometry.k1, geometry.k2, delta) if candidates is None else np.asarray(candidates)
     if len(idx) == 0:
-        return Registration.rejection(model.name, "no candidates")
+        return Registration.unfitted(model.name, "no candidates")
     L = local_frame(geometry.normal, geometry.directions[0])
     local = (np.asarray(points, dtype=np.float64) - geometry.contact) @ L.T
     problem = Superposition(model, local)
@@ -231,7 +231,7 @@ def register(model: ClosedFormSurface, table: CurvatureTable, geometry: LocalGeo
     uv, phi, E = problem.descend(uv0, phi0, max_iterations=max_iterations)
     best = int(np.argmin(E))
     if not np.isfinite(E[best]):
-        return Registration.rejection(model.name, "registration failed")
+        return Registration.unfitted(model.name, "registration failed")
     jet = model.frame_jet(uv[best:best + 1, 0], uv[best:best + 1, 1])
     R = jet.frame[0] @ rotations_z(phi[best:best + 1])[0] @ L
     q = jet.point[0]

@@ -344,14 +344,14 @@ def register(model: MeshModel, table: CurvatureTable, geometry: LocalGeometry, p
         delta = default_delta(model)
     idx = table.candidates(geometry.k1, geometry.k2, delta) if candidates is None else np.asarray(candidates)
     if len(idx) == 0:
-        return Registration.rejection(model.name, "no candidates")
+        return Registration.unfitted(model.name, "no candidates")
     problem = MeshSuperposition(model, geometry, curves, phi_step=phi_step)
     if problem.radius > model.size:
-        return Registration.rejection(model.name, "the touch is larger than the model")
+        return Registration.unfitted(model.name, "the touch is larger than the model")
     found = problem.walks(table.samples.sites[idx, 0].astype(np.int64), max_steps=max_steps)
     v, e, phi, _ = min(found, key=lambda w: w[1])
     if not np.isfinite(e):
-        return Registration.rejection(model.name, "registration failed")
+        return Registration.unfitted(model.name, "registration failed")
     R = problem.rotation(v, phi)
     q = model.vertices[v]
     return Registration(model=model.name, error=float(e), location=q.copy(), rotation=R,

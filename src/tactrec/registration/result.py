@@ -3,13 +3,27 @@
 from __future__ import annotations
 
 import dataclasses
+import enum
 
 import numpy as np
 
 from ..linalg import transform
 
-__all__ = ["Registration", "local_frame", "rotations_z", "rotations_from_vectors", "cross",
+__all__ = ["Registration", "Outcome", "local_frame", "rotations_z", "rotations_from_vectors", "cross",
            "apply_poses"]
+
+
+class Outcome(enum.Enum):
+    """What a search made of one model (the ``outcome`` of its :class:`Registration`)."""
+
+    #: registered: a pose and its error
+    FITTED = "fitted"
+    #: ruled out, for the reason given (no candidates, the touch is larger than the model)
+    REJECTED = "rejected"
+    #: left unrefined by a search that stopped before it (its cheap score far behind): not ruled out
+    DEFERRED = "deferred"
+    #: not among the models the search was asked to search
+    NOT_SEARCHED = "not searched"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -38,8 +52,10 @@ class Registration:
         (Section 4.2: from the site's ``d1`` to the data's ``t1``).
     normal_sign : int
         +1 if the data normal was used as estimated, -1 if reversed.
-    rejected : str or None
-        Why the model was rejected (e.g. ``"no candidates"``).
+    outcome : Outcome
+        What the search made of the model: fitted (a pose), rejected, deferred or not searched.
+    reason : str
+        Why a model was not fitted (e.g. ``"no candidates"``), as printed; empty when fitted.
     spread : float
         How well the data pin the contact: the root of the trace of its covariance under the
         fit (model units; 0 where not computed).
@@ -47,9 +63,6 @@ class Registration:
         For a model the search pruned (its poses came nowhere near the best
         error so far on other models): the best score its cheap stage reached,
         model units; ``inf`` otherwise.
-    deferred : bool
-        Whether the model was left unrefined by the search (pruned or not reached before it
-        stopped), not ruled out: its error says nothing about it.
     alternatives : (k, 3, 4) float or None
         Other poses the search refined on this model (``[R | t]`` each, same convention), best
         first: where a session looks for one pose that fits several touches.
@@ -65,21 +78,29 @@ class Registration:
     site: np.ndarray | None = None
     phi: float | None = None
     normal_sign: int = 1
-    rejected: str | None = None
+    outcome: Outcome = Outcome.FITTED
+    reason: str = ""
     cheap: float = float("inf")
     spread: float = 0.0
     alternatives: np.ndarray | None = None
-    deferred: bool = False
 
     @classmethod
-    def rejection(cls, model: str, reason: str, *, scale: float = 1.0, cheap: float = float("inf"),
-                  deferred: bool = False) -> "Registration":
-        return cls(model=model, error=float("inf"), scale=scale, rejected=reason, cheap=float(cheap),
-                   deferred=bool(deferred))
+    def unfitted(cls, model: str, reason: str, outcome: Outcome = Outcome.REJECTED, *, scale: float = 1.0,
+                 cheap: float = float("inf")) -> "Registration":
+        """A model the search did not fit (``outcome``: rejected, deferred or not searched), and why."""
+        if outcome is Outcome.FITTED:
+            raise ValueError("a fitted registration has a pose")
+        return cls(model=model, error=float("inf"), scale=scale, outcome=outcome, reason=reason, cheap=float(cheap))
 
     @property
     def ok(self) -> bool:
-        return self.rejected is None
+        """Whether the model was fitted (it has a pose and an error)."""
+        return self.outcome is Outcome.FITTED
+
+    @property
+    def rejected(self) -> str | None:
+        """Why the model was not fitted, as printed (None when it was)."""
+        return None if self.ok else self.reason
 
     def to_json(self) -> dict:
         if not self.ok:
