@@ -35,13 +35,37 @@ from .io.touch import TactileData
 from .outliers import kept
 from .tip import EDGE, bends, corrected, offset, surface_curves, traceable
 
-__all__ = ["Touch", "subset"]
+__all__ = ["Touch", "Context", "subset"]
 
 
 def subset(curves, per_curve: int) -> np.ndarray:
     """``per_curve`` points of each curve, evenly spread along it (ends included): ``(k * per_curve, 3)``."""
     return np.concatenate([np.asarray(c, dtype=np.float64)[np.linspace(0, len(c) - 1, per_curve).round().astype(int)]
                            for c in curves])
+
+
+@dataclasses.dataclass(frozen=True)
+class Context:
+    """Other touches of the same object, in the same frame, that a touch's poses are scored on too
+    (a session's touches: :mod:`tactrec.session`).
+
+    Attributes
+    ----------
+    curves : tuple of (n_i, 3) arrays
+        Their curves (data units).
+    fit : float
+        The mean distance over the touch's points and these together (data units) that counts as
+        a fit of them all (0: the touch's own fit limit decides).
+    tips : tuple of float
+        Each curve's tip radius (data units; empty: all 0).
+    surface : tuple of (n_i, 3) arrays
+        The curves moved onto the surface (data units; empty: the curves as given).
+    """
+
+    curves: tuple
+    fit: float = 0.0
+    tips: tuple = ()
+    surface: tuple = ()
 
 
 @dataclasses.dataclass(frozen=True)
@@ -166,15 +190,15 @@ class Touch:
         context = self.joint_curves[len(self.curves):]
         return np.concatenate([self.subset(per_curve), *(c[len(c) // 2][None] for c in context)])
 
-    def with_context(self, curves, *, fit: float = 0.0, tips=None, surface=None) -> "Touch":
-        """The same touch, its poses scored also on ``curves`` (other touches, same frame, data units);
-        ``fit``: the joint mean distance that counts as a fit of them all (see :attr:`fit`); ``tips``:
-        each curve's tip radius and ``surface`` the curves moved onto the surface (None: 0 and the
-        curves themselves)."""
-        tips = () if tips is None or not np.any(tips) else tuple(float(r) for r in tips)
-        surface = () if not tips or surface is None else tuple(np.asarray(c, dtype=np.float64) for c in surface)
-        return dataclasses.replace(self, context=tuple(np.asarray(c, dtype=np.float64) for c in curves),
-                                   fit=float(fit), context_tips=tips, context_surface=surface)
+    def with_context(self, context: Context) -> "Touch":
+        """The same touch, its poses scored also on the curves of ``context`` (other touches, same
+        frame): :attr:`context` and :attr:`fit` from it, the tips and surface curves where any tip
+        is not 0."""
+        tips = () if not context.tips or not np.any(context.tips) else tuple(float(r) for r in context.tips)
+        surface = () if not tips or not context.surface else \
+            tuple(np.asarray(c, dtype=np.float64) for c in context.surface)
+        return dataclasses.replace(self, context=tuple(np.asarray(c, dtype=np.float64) for c in context.curves),
+                                   fit=float(context.fit), context_tips=tips, context_surface=surface)
 
     @cached_property
     def geometry(self) -> LocalGeometry:

@@ -57,7 +57,7 @@ under that pose exceeds ``k`` times the touch's noise sigma (third
 differences of the points kept) -- the same ``k``: Gaussian noise passes
 it with probability below :data:`ALPHA` -- and :data:`FLOOR` steps; it is
 set aside too, and the judged search's registrations, every model's, are
-refined from their poses on the points left (:func:`judge_ends`): those
+refined from their poses on the points left (:func:`tactrec.recognition.again.judge_ends`): those
 points are the judged ones and the good ends, which the poses already fit,
 so a few steps carry each pose over, at a small part of a second search's
 cost.  A judged search that did not settle (its budget ran out before a
@@ -90,11 +90,10 @@ import dataclasses
 import numpy as np
 
 from .errors import InputError
-from .io.meeting import meeting
 from .io.touch import MIN_POINTS, TactileData
 
 __all__ = ["ALPHA", "FLOOR", "ENDS", "spike_residuals", "bound", "flagged", "kept", "ends", "ends_off", "without",
-           "judged_ends", "judge_ends"]
+           "judged_ends"]
 
 #: the chance that Gaussian noise sets any point of a touch aside
 ALPHA = 1e-6
@@ -229,56 +228,3 @@ def ends_off(curves, residuals: np.ndarray, noise: float, step: float, judged=No
     bounds = np.cumsum([0] + sizes)
     judged = ends(sizes) if judged is None else judged
     return [end & (np.abs(residuals[a:b]) > limit) for end, a, b in zip(judged, bounds[:-1], bounds[1:])]
-
-
-def judge_ends(touch, search, refit, residuals, estimation: dict):
-    """The touch (a :class:`~tactrec.features.Touch` with outliers) without the curves' end points off
-    the registration (module text), and the search's outcome on it: ``search(touch)`` the method's
-    search, ``refit(outcome, touch)`` the method's refit of a search's registrations on a touch of
-    nearly the same points (:meth:`~tactrec.methods.base.Method.refit`), ``residuals(registration,
-    touch)`` the signed distances of the touch's points under a registration's pose, ``estimation``
-    the keywords of :meth:`~tactrec.features.Touch.from_data`.
-
-    The judged points alone (each curve without its judged ends, :func:`judged_ends`) are searched;
-    the ends are judged under that search's best pose (:func:`ends_off`); its registrations are
-    refitted on the points left where it settled, and the points left searched again where it did
-    not, the work of both added.  Where no end can be judged, the judged points are too few to be a
-    touch, or their search registers nothing, the touch is searched as it is; where setting the ends
-    aside leaves no touch the package takes, they are kept."""
-    from .features import Touch
-
-    judged = judged_ends(touch.data.curves, meeting(touch.data)[0])
-    count = int(sum(int(m.sum()) for m in judged))
-    if not count:
-        return touch, search(touch)
-    try:
-        inner = Touch.from_data(without(touch.data, judged, count), **estimation)
-    except InputError:
-        return touch, search(touch)
-    first = search(inner)
-    best = min((r for r in first.ranking if r.ok), key=lambda r: (r.error / r.scale, r.model), default=None)
-    if best is None:
-        return touch, _both(first, search(touch))
-    marks = ends_off(touch.curves, residuals(best, touch), touch.noise, touch.data.spacing, judged)
-    off = int(sum(int(m.sum()) for m in marks))
-    if off:
-        try:
-            again = Touch.from_data(without(touch.data, marks, touch.outliers + off), **estimation)
-        except InputError:                     # the ends are what makes it a touch: they are kept
-            return touch, _carried(first, touch, search, refit)
-        touch = dataclasses.replace(again, outliers=touch.outliers + off + again.outliers)
-    return touch, _carried(first, touch, search, refit)
-
-
-def _carried(first, touch, search, refit):
-    """The outcome of ``first``, the judged points' search, on ``touch``: refitted where it settled (its
-    best is a fit, or clear of every other model), searched again where it did not (its registrations
-    are then no more than where its budget stopped)."""
-    return refit(first, touch) if first.settled else _both(first, search(touch))
-
-
-def _both(first, found):
-    """The outcome ``found`` with the work and the budget of ``first`` added, settled only when both were."""
-    allowed = None if first.allowed is None or found.allowed is None else first.allowed + found.allowed
-    return dataclasses.replace(found, work=found.work + first.work, allowed=allowed,
-                               settled=bool(first.settled and found.settled))

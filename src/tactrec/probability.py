@@ -46,7 +46,7 @@ not settle is never sure either way.  In a session every kept touch is
 evidence, each counted at the excess of the touch the model's joint pose
 fits worst: the pose must fit each of them, and each touch it fits makes
 unknown less likely.  A line the sensor followed without meeting anything
-must not cut into the surface (:mod:`tactrec.session.lines`).
+must not cut into the surface (:mod:`tactrec.missed`).
 
 The resolution.  A sensor, a scan's facets and the search's own steps all
 resolve distances down to some size, and below it two fits are equal: a
@@ -84,8 +84,11 @@ from .bootstrap import REPLICATES, SEED, bootstrap_probabilities, lag_one
 
 __all__ = ["Evidence", "residuals", "evidence", "bootstrap_probabilities", "noise_fit", "fit_limit", "resolution",
            "fit_standard_error", "fit_spread", "open_world", "AMBIGUOUS", "REPLICATES", "UNKNOWN_PRIOR",
-           "CONSISTENT_SE", "NOISE_VARIANCE", "SEARCH_MISS"]
+           "CONSISTENT_SE", "NOISE_VARIANCE", "SEARCH_MISS", "FLOOR", "most_probable"]
 
+#: on noise-free data a fit is within this fraction of the touch's radius, for a method without a ``floor`` of
+#: its own (:func:`resolution`)
+FLOOR = 1e-3
 #: a result is ambiguous when its confidence (the best model's probability) is below this
 AMBIGUOUS = 0.95
 #: the prior probability that a touch (or session) comes from none of the database's models
@@ -100,6 +103,17 @@ CONSISTENT_SE = 3.0
 #: three curves) times the points it is taken over, for white Gaussian noise: 1.14, 1.10, 1.04 and 1.01
 #: on 21, 41, 81 and 161 points a curve (4,000 draws each; ``tests/test_open_world.py`` checks it)
 NOISE_VARIANCE = 1.1
+
+
+def most_probable(names: Sequence[str], probabilities: dict[str, float]) -> str | None:
+    """The answer of a ranking, for single touches and sessions alike: of ``names`` (the models with a
+    pose, ranked by error, best first) the most probable, the first of equals; the first where none
+    has a probability (None where there is none)."""
+    if not names:
+        return None
+    if not probabilities:
+        return names[0]
+    return max(names, key=lambda name: probabilities.get(name, 0.0))
 
 
 def resolution(touch, floor: float) -> float:
@@ -223,7 +237,7 @@ class Evidence:
         Curves per touch, in order (empty: all the curves are one touch).
     misses : (k, q) float or None
         Per model, the excess of each of ``q`` lines the sensor followed without meeting anything
-        (:mod:`tactrec.session.lines`: how far the line cuts into its surface under its pose, in
+        (:mod:`tactrec.missed`: how far the line cuts into its surface under its pose, in
         the fit test's units; 0 where it stays outside).
     resolution : float
         The least distance a fit is read at (data units, :func:`resolution`): the shares compare
@@ -279,35 +293,19 @@ class Evidence:
         cut = self.line_excess() if lines else None
         return worst if cut is None else np.maximum(worst, cut)
 
-    def chance_statistics(self) -> tuple[float, float, float]:
-        """``(x1, x2, r)`` for the null model of chance fits (:mod:`tactrec.chance`): the best two
-        models' fits, each its mean distance over every point (read as :attr:`resolution` where
-        closer) against the points-weighted mean of the touches' limits
-        (:func:`tactrec.chance.statistic`), and the touches' median resolving power
-        ``log10(radius / limit)``."""
-        from .chance import SPAN, statistic
-
-        points = self.touch_points()
-        total = max(int(points.sum()), 1)
-        limit = float((np.asarray(self.limits) * points).sum() / total)          # element-wise: no BLAS
-        # a fit closer than the resolution is read as at it (module text): all such fits are one evidence
-        means = np.maximum(np.sort(self.distances.sum(axis=1) / total)[:2], self.resolution)
-        x = [float(statistic(v, limit)) for v in means] + [SPAN] * (2 - len(means))
-        r = float(np.median(np.log10(np.asarray(self.radii, dtype=np.float64) / np.asarray(self.limits))))
-        return x[0], x[1], r
-
     def outcomes(self, *, prior: float = UNKNOWN_PRIOR, miss: float = SEARCH_MISS, replicates: int = REPLICATES,
                  rng=SEED, chance=None) -> tuple[np.ndarray, float]:
         """Each model's probability ``(k,)`` and that of ``unknown`` (:func:`open_world`; sum 1).  Without
         ``limits`` (a closed world) unknown is 0 and the models' probabilities are their shares.
         ``chance``: the database's null model of chance fits (:class:`tactrec.chance.NullModel`), whose
-        likelihood ratio then weighs the touches against unknown (:func:`open_world`'s ``ratio``)."""
+        likelihood ratio of this evidence (:meth:`~tactrec.chance.NullModel.ratio_of`) then weighs the
+        touches against unknown (:func:`open_world`'s ``ratio``)."""
         shares = self.shares(replicates=replicates, rng=rng)
         if not self.limits:
             return shares, 0.0
         ratio = None
         if chance is not None and len(self.radii) == len(self.limits) and len(self.models):
-            ratio = chance.ratio(*self.chance_statistics())
+            ratio = chance.ratio_of(self)
         if ratio is None:
             return open_world(shares, self.excess(), prior, miss, max(len(self.limits), 1))
         return open_world(shares, self.excess(lines=False), prior, miss, max(len(self.limits), 1), ratio=ratio,

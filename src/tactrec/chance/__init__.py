@@ -52,8 +52,8 @@ import numpy as np
 from ..errors import InputError
 from ..io.atomic import write_text_atomic
 
-__all__ = ["NullModel", "SIGNS", "chosen", "statistic", "catalogue_key", "load", "save", "FILE", "FORMAT", "VERSION",
-           "NEAREST", "PENALTIES", "SPAN"]
+__all__ = ["NullModel", "SIGNS", "chosen", "statistic", "statistics", "catalogue_key", "load", "save", "FILE",
+           "FORMAT", "VERSION", "NEAREST", "PENALTIES", "SPAN"]
 
 FORMAT, VERSION = "tactrec-chance", 1
 #: the null model's file in a database folder
@@ -74,6 +74,21 @@ def statistic(mean, limit):
     mean = np.maximum(np.asarray(mean, dtype=np.float64), 0.0)
     with np.errstate(divide="ignore"):
         return np.clip(np.log10(mean / float(limit)), -SPAN, SPAN)
+
+
+def statistics(evidence) -> tuple[float, float, float]:
+    """``(x1, x2, r)`` of a recognition's :class:`~tactrec.probability.Evidence` (module text): the best
+    two models' fits, each its mean distance over every point (read as the evidence's ``resolution``
+    where closer) against the points-weighted mean of the touches' limits (:func:`statistic`), and the
+    touches' median resolving power ``log10(radius / limit)``."""
+    points = evidence.touch_points()
+    total = max(int(points.sum()), 1)
+    limit = float((np.asarray(evidence.limits) * points).sum() / total)          # element-wise: no BLAS
+    # a fit closer than the resolution is read as at it (module text): all such fits are one evidence
+    means = np.maximum(np.sort(evidence.distances.sum(axis=1) / total)[:2], evidence.resolution)
+    x = [float(statistic(v, limit)) for v in means] + [SPAN] * (2 - len(means))
+    r = float(np.median(np.log10(np.asarray(evidence.radii, dtype=np.float64) / np.asarray(evidence.limits))))
+    return x[0], x[1], r
 
 
 def _fingerprint(model) -> str:
@@ -224,6 +239,10 @@ class NullModel:
     def _left(self) -> dict:
         """:meth:`without`'s models, by the names left out (each chooses its prior once)."""
         return {}
+
+    def ratio_of(self, evidence) -> float:
+        """:meth:`ratio` of a recognition's evidence (its :func:`statistics`)."""
+        return self.ratio(*statistics(evidence))
 
     def ratio(self, x1: float, x2: float, resolving: float) -> float:
         """The likelihood ratio, known against unknown, of a touch whose best two fits are ``x1`` and

@@ -22,7 +22,7 @@ import numpy as np
 from ..errors import InputError
 from ..probability import fit_limit
 from ..simulation import simulate_random_touch
-from . import SPAN, NullModel, catalogue_key
+from . import SPAN, NullModel, catalogue_key, statistics
 
 __all__ = ["calibrate", "fits", "LENGTHS", "NOISE", "TOUCHES", "POINTS"]
 
@@ -37,12 +37,12 @@ POINTS = 61
 
 
 def fits(recognition, floor: float) -> tuple[float, float, float]:
-    """A recognition's ``(x1, x2, r)`` as :meth:`tactrec.probability.Evidence.chance_statistics` reads
+    """A recognition's ``(x1, x2, r)`` as :func:`~tactrec.chance.statistics` reads
     them (``SPAN`` for a fit it has not), the one path calibration and recognition share."""
     touch = recognition.touch
     limit = max(fit_limit(touch, floor), touch.fit)
     if recognition.evidence is not None and len(recognition.evidence.models):
-        return recognition.evidence.chance_statistics()
+        return statistics(recognition.evidence)
     return SPAN, SPAN, float(np.log10(touch.radius / limit))
 
 

@@ -22,7 +22,7 @@ along an *approach line*: from :data:`STANDOFF` x ``radius`` outside the
 place along its outward normal, inwards, twice that far (a line that starts
 inside some hypothesis' surface is no candidate).  Under every pose of every
 leading hypothesis the line's outcome is predicted: where it first meets the
-surface (:func:`tactrec.session.lines.first_hit`), and there the touch the
+surface (:func:`tactrec.missed.first_hit`), and there the touch the
 sensor would record, or that it meets nothing.  The place need not lie on
 every hypothesis' surface: a line that one hypothesis says meets the surface
 8 mm before another does separates them best.  A predicted curve runs up to
@@ -34,8 +34,8 @@ Gain.  At a candidate, each pose predicts the outcome: three curves through
 where the line meets its surface, in the same world directions, as the
 session's touches are (their points per curve and spacing), noise-free, or
 no contact.  If a pose that meets nothing is true, a model is weighed by its
-pose the line cuts least (:func:`tactrec.session.lines.cut_depth`, in the
-fit test's units as for a missed line, :mod:`tactrec.session.lines`).  If
+pose the line cuts least (:func:`tactrec.missed.cut_depth`, in the
+fit test's units as for a missed line, :mod:`tactrec.missed`).  If
 hypothesis ``i`` is true, meets the line and model ``M`` is fitted, ``M``'s pose is refitted
 to the earlier touches and ``i``'s predicted touch together, from each of
 its poses: a pose the earlier touches leave free, along a cylinder or over
@@ -111,14 +111,16 @@ import numpy as np
 
 from ..io.session import MissedLine
 from ..probability import CONSISTENT_SE
-from ..session.lines import depth_excess
-from ..session.result import LEADING, MASS
+from ..missed import depth_excess
 from .disagreement import places, touched_side
 from .gain import entropy, expected_gain, information, separation
 from .locate import fan, locate
-from .predict import outcome, to_model
+from .predict import Seen, outcome, to_model
 
-__all__ = ["Proposal", "propose", "MASS", "LEADING", "STANDOFF", "CANDIDATES"]
+__all__ = ["Proposal", "propose", "leading_hypotheses", "MASS", "LEADING", "STANDOFF", "CANDIDATES"]
+
+#: the leading hypotheses of a session hold this much probability, and are at most this many
+MASS, LEADING = 0.99, 4
 
 #: an approach line starts this fraction of ``radius`` outside its place and runs twice as far
 STANDOFF = 0.5
@@ -175,6 +177,21 @@ class Proposal:
         return out
 
 
+def leading_hypotheses(result) -> list:
+    """The most probable hypotheses of a session's ``result`` (:class:`~tactrec.session.SessionResult`),
+    until they hold :data:`MASS` of the models' probability (``unknown``'s aside), at most
+    :data:`LEADING`: those :func:`propose` separates."""
+    probs = result.probabilities
+    total = sum(probs.values())
+    out, mass = [], 0.0
+    for h in sorted(result.ranking, key=lambda h: -probs.get(h.model, 0.0))[:LEADING]:
+        out.append(h)
+        mass += probs.get(h.model, 0.0)
+        if mass >= MASS * total:
+            break
+    return out
+
+
 def propose(session, *, radius: float, angle: float = 60.0, candidates: int = CANDIDATES, rng=None) -> Proposal:
     """The next touch for ``session`` (a :class:`~tactrec.session.Session` with at least one touch).
 
@@ -193,13 +210,13 @@ def propose(session, *, radius: float, angle: float = 60.0, candidates: int = CA
         raise ValueError("the session has no hypothesis yet: add a touch first")
     rng = np.random.default_rng(rng)
     probs = result.probabilities
-    leading = result.leading()
+    leading = leading_hypotheses(result)
     hyps = [(h.model, probs.get(h.model, 0.0)) for h in leading]
     if len(leading) < 2 and probs.get(leading[0].model, 0.0) >= MASS:
         return Proposal(None, None, None, 0.0, hyps, "one hypothesis holds the probability: nothing to separate")
     # no leading pose fits the touches and the lines that met nothing: none predicts where the object
     # is, the touches do; where it has no line, the fall-backs below need not ask again
-    unfit = not any(_fits(session, h) for h in leading)
+    unfit = not any(pose_fits(session, h) for h in leading)
     located = _located(session, leading, hyps, radius=radius, angle=angle) if unfit else None
     if located is not None:
         return located
@@ -232,7 +249,7 @@ def propose(session, *, radius: float, angle: float = 60.0, candidates: int = CA
         "leading hypotheses both predict")
 
 
-def _fits(session, h) -> bool:
+def pose_fits(session, h) -> bool:
     """Whether hypothesis ``h``'s pose fits the touches kept as well as their noise allows and cuts
     into no line that met nothing (by the fit test, :mod:`tactrec.probability`).  The joint pose
     is the one tested, as it is the one the probabilities weigh, not the family's others."""
@@ -309,24 +326,23 @@ def _best_line(session, leading: list, weights: np.ndarray, *, radius: float, an
             directions = fan(t1, t2, angle, start)
             outcomes = [outcome(models[g.model], g, line, directions, step=spacing, points=points, spacing=spacing)
                         for g in poses]
-            kinds = np.array([o[0] for o in outcomes], dtype=object)
-            takes = kinds != None  # noqa: E711
+            takes = np.array([o.seen is not Seen.UNTAKEN for o in outcomes])
             if not np.all(by_model[takes].any(axis=0)):   # every model has a pose that predicts the outcome
                 continue
-            hits = kinds == "hit"
+            hits = np.array([o.seen is Seen.HIT for o in outcomes])
             if len(leading) == 1 and not hits.any():      # a touch to confirm a pose must meet its surface
                 continue
             # the truths: the poses with an outcome, each model keeping its probability
             truth = p * takes / (by_model @ (by_model[takes].sum(axis=0) / by_model.sum(axis=0)))
             z = np.zeros((len(poses), len(leading)))                    # (truth pose, model fitted)
-            missing = (kinds == "miss")
+            missing = np.array([o.seen is Seen.MISS for o in outcomes])
             if missing.any():                # a truth that meets nothing: each model by its pose the line cuts least
-                cut = depth_excess([o[3] for o in outcomes], limit)
+                cut = depth_excess([o.depth for o in outcomes], limit)
                 for j in range(len(leading)):
                     z[missing & (owner != j), j] = cut[owner == j].min()
             if hits.any():
-                stacked = np.array([o[1][0] for o, hit in zip(outcomes, hits) if hit])
-                kept = np.array([o[1][1] for o, hit in zip(outcomes, hits) if hit])
+                stacked = np.array([o.points for o in outcomes if o.seen is Seen.HIT])
+                kept = np.array([o.kept for o in outcomes if o.seen is Seen.HIT])
                 for j in range(len(leading)):
                     others = (owner != j)[hits]
                     if not others.any():
@@ -336,13 +352,13 @@ def _best_line(session, leading: list, weights: np.ndarray, *, radius: float, an
                                  axis=0)
                     z[np.nonzero(hits)[0][others], j] = sep
             gain = expected_gain(weights, unknown, z, hits, truth, takes)
-            contact = outcomes[0][2]      # where the most probable hypothesis' joint pose (its family's first) meets it
+            contact = outcomes[0].hit   # where the most probable hypothesis' joint pose (its family's first) meets it
             found.append((gain, c if contact is None else contact, normal, directions, line))
             taken += 1
-    return _chosen(found, contacts, before)
+    return choose(found, contacts, before)
 
 
-def _chosen(found: list, contacts: np.ndarray, entropy: float):
+def choose(found: list, contacts: np.ndarray, entropy: float):
     """The line proposed among ``found``, ``(gain, contact (3,), normal, directions, line)`` each: of those
     whose gain lies within :data:`TIE` x ``entropy`` (bits) of the largest, the one farthest from
     every earlier contact (world ``contacts (N, 3)``), the larger gain on a tie; None for none."""

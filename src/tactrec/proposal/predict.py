@@ -3,11 +3,39 @@
 
 from __future__ import annotations
 
+import dataclasses
+import enum
+
 import numpy as np
 
-from ..session.lines import crossing
+from ..missed import crossing
 
-__all__ = ["KEPT", "to_world", "to_model", "predicted", "outcome"]
+__all__ = ["KEPT", "Seen", "Prediction", "to_world", "to_model", "predicted", "outcome"]
+
+
+class Seen(enum.Enum):
+    """What an approach line meets under a pose."""
+
+    #: the surface, where it takes the touch the sensor would trace
+    HIT = "hit"
+    #: nothing: the line passes the surface by
+    MISS = "miss"
+    #: the surface, where it will not take the touch (it turns an edge within the curves' length)
+    UNTAKEN = "untaken"
+
+
+@dataclasses.dataclass(frozen=True)
+class Prediction:
+    """A line's outcome under one pose (:func:`outcome`): what it meets, the touch predicted there
+    (``points (k, 3)`` world frame and which were predicted, ``kept (k,)``; None unless ``HIT``),
+    where it first meets the surface (``hit (3,)`` world, None for a miss) and how far it cuts into
+    the surface (``depth``, world units)."""
+
+    seen: Seen
+    points: np.ndarray | None
+    kept: np.ndarray | None
+    hit: np.ndarray | None
+    depth: float
 
 #: a predicted curve is taken up to where the surface turns an edge, and must keep this share of its points
 KEPT = 0.25
@@ -49,14 +77,14 @@ def predicted(model, h, contact_w: np.ndarray, directions_w: np.ndarray, *, poin
     return ((x - t) @ R) / s, kept.reshape(-1)
 
 
-def outcome(model, pose, line, directions, *, step: float, points: int, spacing: float):
-    """What ``line`` gives under ``pose``, and how far it cuts into its surface (world units,
-    :func:`tactrec.session.lines.crossing`): ``("miss", None, None, depth)``,
-    ``("hit", (points (k, 3), kept (k,)), hit, depth)`` (the touch predicted where it meets the
-    surface, at world point ``hit``: :func:`predicted`), or ``(None, None, hit, depth)`` where the
-    surface there will not take the touch."""
+def outcome(model, pose, line, directions, *, step: float, points: int, spacing: float) -> Prediction:
+    """What ``line`` gives under ``pose`` (:class:`Prediction`): where it meets the surface and how far
+    it cuts into it (:func:`tactrec.missed.crossing`), and there the touch the sensor would record
+    (:func:`predicted`), or that the surface there will not take it."""
     hit, depth = crossing(model, pose, line, step)
     if hit is None:
-        return "miss", None, None, depth
+        return Prediction(Seen.MISS, None, None, None, depth)
     x = predicted(model, pose, hit, directions, points=points, spacing=spacing)
-    return ("hit" if x is not None else None), x, hit, depth
+    if x is None:
+        return Prediction(Seen.UNTAKEN, None, None, hit, depth)
+    return Prediction(Seen.HIT, x[0], x[1], hit, depth)

@@ -4,16 +4,13 @@ result over all models (:class:`SessionResult`); :mod:`tactrec.session` computes
 from __future__ import annotations
 
 import dataclasses
-import functools
 
 import numpy as np
 
-from ..probability import AMBIGUOUS, UNKNOWN_PRIOR, Evidence
+from ..answer import Answer
+from ..probability import UNKNOWN_PRIOR, Evidence
 
-__all__ = ["Hypothesis", "SessionResult", "MASS", "LEADING"]
-
-#: the leading hypotheses of a session hold this much probability, and are at most this many
-MASS, LEADING = 0.99, 4
+__all__ = ["Hypothesis", "SessionResult"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -66,7 +63,7 @@ class Hypothesis:
 
 
 @dataclasses.dataclass(frozen=True)
-class SessionResult:
+class SessionResult(Answer):
     """The recognition of a session: one object, one pose per model.
 
     ``ranking`` holds the models with a joint pose, by error over the touches not slipped;
@@ -77,7 +74,9 @@ class SessionResult:
     joint fits, the search with the other touches in the score); ``missed`` the lines that met
     nothing (:meth:`tactrec.session.Session.add_miss`); ``outliers`` how many points each touch set
     aside as off its curve's trace (:mod:`tactrec.outliers`); ``chance`` the database's null model
-    of chance fits (:mod:`tactrec.chance`, None where it has none).
+    of chance fits (:mod:`tactrec.chance`, None where it has none); ``searched`` the work and the
+    most work allowed (closest-point queries; None: no limit) of each search the add ran, the
+    touch's own first, then step 5's.
     """
 
     ranking: list
@@ -92,54 +91,13 @@ class SessionResult:
     missed: int = 0
     outliers: tuple = ()
     chance: object = None
+    searched: tuple = ()
 
-    @property
-    def best(self) -> str | None:
-        """The most probable model (docs/formats.md): the first by error unless a missed line or a touch its
-        pose fits worst has taken another's probability past it."""
-        if not self.ranking:
-            return None
-        p = self.probabilities
-        return max(self.ranking, key=lambda h: p.get(h.model, 0.0)).model if p else self.ranking[0].model
-
-    @functools.cached_property
-    def _outcomes(self) -> tuple[dict[str, float], float]:
-        if self.evidence is None:
-            return {}, 1.0
-        return self.evidence.named_outcomes(prior=self.unknown_prior, chance=self.chance)
-
-    @property
-    def probabilities(self) -> dict[str, float]:
-        return self._outcomes[0]
-
-    @property
-    def unknown(self) -> float:
-        """The probability that the object is none of the models (docs/formats.md)."""
-        return self._outcomes[1]
-
-    @property
-    def confidence(self) -> float:
-        return float(self.probabilities.get(self.best, 0.0)) if self.best else 0.0
-
-    @property
-    def ambiguous(self) -> bool:
-        return self.best is not None and self.confidence < AMBIGUOUS
+    def _posed(self) -> list[str]:
+        return [h.model for h in self.ranking]
 
     def hypothesis(self, model: str) -> Hypothesis | None:
         return next((h for h in self.ranking if h.model == model), None)
-
-    def leading(self) -> list[Hypothesis]:
-        """The most probable hypotheses, until they hold :data:`MASS` of the models' probability
-        (``unknown``'s aside), at most :data:`LEADING`: those :func:`tactrec.proposal.propose` separates."""
-        probs = self.probabilities
-        total = sum(probs.values())
-        out, mass = [], 0.0
-        for h in sorted(self.ranking, key=lambda h: -probs.get(h.model, 0.0))[:LEADING]:
-            out.append(h)
-            mass += probs.get(h.model, 0.0)
-            if mass >= MASS * total:
-                break
-        return out
 
     def to_json(self) -> dict:
         """docs/formats.md's result for a session (``rotation``/``translation`` map the world onto each model)."""

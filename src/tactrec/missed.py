@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..probability import CONSISTENT_SE, residuals
+from .probability import CONSISTENT_SE, residuals
 
 __all__ = ["crossing", "cut_depth", "depth_excess", "miss_excess", "first_hit"]
 

@@ -1,0 +1,251 @@
+"""The one path from a touch to a result (paper Section 3.3): :class:`Recognizer`.
+
+A :class:`Recognizer` holds the models, prepared once, and the worker
+processes a method's stages run in; :func:`recognize` is the one-off call,
+in this process.  A recognition of tactile data:
+
+1. refuses a touch in the wrong units (:func:`check_scale`);
+2. computes the touch's features once (:class:`tactrec.features.Touch`: its
+   points off their curves' traces set aside, the estimate at the contact,
+   the noise), with the other touches of a session scored too where it has a
+   :class:`~tactrec.features.Context`;
+3. runs the method's search (:mod:`tactrec.methods`) over the models; where the
+   sensor slipped, the curves' ends are judged by the fit, and where curves
+   that miss each other meet at another point too, that one is searched as well
+   (:mod:`.again`);
+4. ranks the registrations by error (eq. 9) and weighs them into probabilities
+   (:mod:`tactrec.probability`): the :class:`~.result.Recognition`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from typing import Iterable
+
+import numpy as np
+
+from ..errors import InputError
+from ..features import Context, Touch
+from ..io.touch import TactileData
+from ..methods import DEFAULT_METHOD, get_method
+from ..probability import FLOOR, UNKNOWN_PRIOR, evidence, fit_limit, residuals, resolution
+from ..registration.result import Registration
+from ..runner import Held, Pool, Serial, can_fork
+from ..tables import CurvatureTable
+from ..units import conversion
+from .again import best_error, judge_ends, missing, other_meetings
+from .result import Recognition
+
+__all__ = ["Recognizer", "recognize", "ModelEntry", "check_scale", "OFF_SCALE"]
+
+
+@dataclasses.dataclass(frozen=True)
+class ModelEntry:
+    """A model with its lookup table, ready for recognition."""
+
+    model: object
+    table: CurvatureTable
+
+    @property
+    def name(self) -> str:
+        return self.model.name
+
+
+#: a touch this many times larger than every model, or smaller than every one, is in the wrong units
+OFF_SCALE = 1000.0
+
+
+def check_scale(data: TactileData, models) -> None:
+    """Refuse, before any arithmetic on it, a touch whose extent (in each model's units) is more than
+    :data:`OFF_SCALE` times every model's size, or less than every model's size over it."""
+    points = data.points
+    extent = float(np.max(points.max(axis=0) - points.min(axis=0)))
+    ratios = [extent * conversion(data.units, getattr(e.model, "units", None)) / e.model.size for e in models]
+    if not ratios or OFF_SCALE ** -1 <= max(ratios) and min(ratios) <= OFF_SCALE:
+        return
+    sizes = [e.model.size for e in models]
+    span = f"{min(sizes):.3g}" if min(sizes) == max(sizes) else f"{min(sizes):.3g}-{max(sizes):.3g}"
+    where = f"over {OFF_SCALE:g} times" if min(ratios) > OFF_SCALE else f"under 1/{OFF_SCALE:g} of"
+    kinds = {getattr(e.model, "units", None) for e in models}
+    model_units = (kinds.pop() or "units") if len(kinds) == 1 else "in their own units"
+    raise InputError(f"the touch spans {extent:.3g} {data.units or 'units'}, {where} every model's size "
+                     f"({span} {model_units}): are its units right?", data.source)
+
+
+def _rank_key(r: Registration):
+    """Accepted models first, by error in the data's units (models may differ in units)."""
+    return (not r.ok, r.error / r.scale if r.ok else 0.0, r.model)
+
+
+class Recognizer:
+    """Recognises touches against one set of models, keeping what it builds between touches.
+
+    Parameters
+    ----------
+    models : iterable of ModelEntry
+        Models with their lookup tables (see :mod:`tactrec.database`).
+    method : str
+        ``"fast"`` (the default) or ``"paper"``.
+    workers : int
+        Processes a method's stages run in (1: this process; the result is the same).  Forked
+        once, after the models are prepared, and ended by :meth:`close` or the ``with`` block.
+    window, degree, curvature_method
+        Passed to :func:`tactrec.estimation.estimate`.
+    unknown_prior : float
+        The prior probability that a touch came from none of the models, in [0, 1)
+        (:data:`~tactrec.probability.UNKNOWN_PRIOR`; 0: a closed world).
+    chance : NullModel, None or False
+        The models' null model of chance fits (:mod:`tactrec.chance`), fitted on these models for
+        this method; None: a database's own, where it holds one; False: none, ``unknown`` from the
+        fit test alone.
+    tips : iterable of float
+        Radii of round tips (the models' units) whose offset fields every mesh prepares now, before
+        the workers fork (:mod:`tactrec.surfaces.mesh_offset`: read from the stored fields up to
+        10 mm, built beyond), so that no recognition reads or builds them.
+    **options
+        The method's options (its :class:`~tactrec.methods.base.Config`); a name it does not
+        know is an :class:`~tactrec.errors.InputError`.
+    """
+
+    def __init__(self, models: Iterable[ModelEntry], *, method: str = DEFAULT_METHOD, workers: int = 1,
+                 window: int | str | None = "auto", degree: int = 3, curvature_method: str = "auto",
+                 unknown_prior: float = UNKNOWN_PRIOR, chance=None, tips: Iterable[float] = (), **options):
+        if not (isinstance(unknown_prior, (int, float)) and 0.0 <= unknown_prior < 1.0):
+            raise InputError(f"the prior of unknown must be a number in [0, 1), not {unknown_prior!r}", "unknown_prior")
+        self.unknown_prior = float(unknown_prior)
+        self.method = get_method(method)
+        self.config = self.method.configure(**options)
+        stored = getattr(models, "chance", None)          # a database's own
+        self.models = list(models)
+        from ..chance import chosen
+
+        self.chance = chosen(self.models, chance, self.method.name, stored)
+        self._by_name = {entry.name: entry for entry in self.models}
+        self.estimation = dict(window=window, degree=degree, curvature_method=curvature_method)
+        tips = tuple(float(r) for r in tips)
+        if not all(np.isfinite(r) and r > 0 for r in tips):
+            raise InputError(f"a tip radius is a positive number (got {tips})", "tips")
+        for entry in self.models:
+            self.method.prepare(entry.model)
+            for r in tips if entry.model.kind == "mesh" else ():
+                entry.model.offset(float(r)).distance_field
+        if self.method.uses_engine:
+            from ..engine.kernels import warm
+
+            warm()         # compiled or loaded now, not in a recognition's seconds; forked workers inherit it
+        held = Held(self.models)
+        self.runner = Pool(held, int(workers)) if int(workers) >= 2 and can_fork() else Serial(held)
+
+    def __enter__(self) -> "Recognizer":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """End the worker processes."""
+        if isinstance(self.runner, Pool):
+            self.runner.close()
+
+    def session(self, **options):
+        """A new :class:`~tactrec.session.Session` of touches of one object, recognised with these
+        models (nothing is rebuilt between touches); ``options`` are the session's keywords
+        (``search_budget``, ``joint_search``)."""
+        from ..session import Session
+
+        return Session(self, **options)
+
+    def recognize(self, data: TactileData, *, among=None, budget: int | None = None) -> Recognition:
+        """Recognise one touch (Section 3.3; the module text).  ``among``: the names of the models to
+        search (None: all); the others are rejected as not searched.  ``budget``: the most work
+        (closest-point queries) the search may spend in all, when lower than the method's own budget;
+        the first round runs whatever it costs.
+
+        Where the data give no ``contact``, the curves' meeting point is
+        :func:`~tactrec.io.meeting.find_contact`'s, and curves that miss each other (beyond their
+        noise) are searched from each other meeting point too until one fits or ``budget`` is spent
+        (:func:`.again.other_meetings`).  A touch with outliers is searched without its curves' ends,
+        then refitted (:func:`.again.judge_ends`)."""
+        return self._recognize(data, None, among, budget)
+
+    def recognize_jointly(self, data: TactileData, context: Context, *, among=None,
+                          budget: int | None = None) -> Recognition:
+        """:meth:`recognize`, the poses scored also on ``context``'s curves (other touches of the same
+        object, same frame: a session's step 5, :mod:`tactrec.session`), a method that searches from
+        this touch's local geometry scoring its poses on them (:attr:`~tactrec.methods.base.Method.scores_context`);
+        a fit is the context's ``fit`` where that is larger than this touch's own limit.  The ends of
+        a touch with outliers are not judged again here: the session's touches were each judged alone."""
+        return self._recognize(data, context, among, budget)
+
+    def _recognize(self, data: TactileData, context: Context | None, among, budget: int | None) -> Recognition:
+        start = time.perf_counter()
+        check_scale(data, self.models)
+        chosen = None
+        if among is not None:
+            unknown = sorted(set(among) - set(self._by_name))
+            if unknown:
+                raise InputError(f"no model named {unknown[0]!r} among the recognizer's", "among")
+            chosen = [i for i, entry in enumerate(self.models) if entry.name in set(among)]
+
+        def refit(outcome, t):
+            return self.method.refit(t, self.models, self.config, self.runner, outcome)
+
+        def searched(d, left):
+            def search(t):
+                return self.method.search(t, self.models, self.config, self.runner, among=chosen, budget=left)
+            touch = Touch.from_data(d, **self.estimation)
+            if context is not None and len(context.curves):
+                touch = touch.with_context(context)
+            elif touch.outliers:               # a slipping sensor: its curves' ends judged by the fit
+                return judge_ends(touch, search, refit, self._residuals, self.estimation)
+            return touch, search(touch)
+
+        touch, outcome = searched(data, budget)
+        if data.contact is None and not self._fits(touch, outcome) and missing(touch):
+            touch, outcome = other_meetings(data, touch, outcome, searched, self._fits, budget)
+        return self._recognition(touch, outcome, start)
+
+    def _recognition(self, touch: Touch, outcome, start: float) -> Recognition:
+        """The :class:`~.result.Recognition` of ``outcome``, the search of ``touch``: the ranking by error,
+        the evidence of the probabilities (computed now: they are part of its seconds)."""
+        ranking = sorted(outcome.ranking, key=_rank_key)
+        ok = [r for r in ranking if r.ok]
+        limit = max(fit_limit(touch, self.floor), touch.fit)
+        found = evidence([r.model for r in ok], [self._residuals(r, touch) for r in ok],
+                         [len(c) for c in touch.joint_curves], touch.noise, limits=(limit,),
+                         resolution=resolution(touch, self.floor), radii=(touch.radius,))
+        out = Recognition(ranking, touch.estimate, 0.0, self.method.name, found, outcome.settled, outcome.work,
+                          outcome.depth, touch, outcome.allowed, self.unknown_prior, self.chance)
+        out.best                                # the answer and its probabilities are part of its seconds
+        object.__setattr__(out, "seconds", time.perf_counter() - start)          # set once, before anyone sees it
+        return out
+
+    def _fits(self, touch: Touch, outcome) -> bool:
+        """Whether the best registration of ``outcome`` fits ``touch`` (within its fit limit)."""
+        return best_error(outcome) <= max(fit_limit(touch, self.floor), touch.fit)
+
+    @property
+    def floor(self) -> float:
+        """The method's ``floor`` (a fit's mean distance per unit radius on noise-free data), or
+        :data:`FLOOR` for a method without one."""
+        return float(getattr(self.config, "floor", FLOOR))
+
+    def _residuals(self, r: Registration, touch: Touch) -> np.ndarray:
+        """The data's signed distances (data units) to the model of ``r`` under its pose (to the model
+        offset by each point's tip: :mod:`tactrec.tip`)."""
+        model = touch.in_units(r.scale).exact(self._by_name[r.model].model)
+        return residuals(model, r.rotation, r.translation, touch.joint_points, r.scale)
+
+
+def recognize(data: TactileData, models: Iterable[ModelEntry], *, method: str = DEFAULT_METHOD, workers: int = 1,
+              window: int | str | None = "auto", degree: int = 3, curvature_method: str = "auto",
+              **options) -> Recognition:
+    """Recognise one touch against ``models`` (Section 3.3): a one-off :class:`Recognizer`.
+
+    For many touches against the same models, keep a :class:`Recognizer` instead: it prepares
+    the models and starts its worker processes once.
+    """
+    with Recognizer(models, method=method, workers=workers, window=window, degree=degree,
+                    curvature_method=curvature_method, **options) as recognizer:
+        return recognizer.recognize(data)
