@@ -119,6 +119,7 @@ def add_serve_parser(sub, *, count, mesh_options, methods, default_method):
     p.add_argument("--models", nargs="+", metavar="MODEL", help="model files or built-in names, instead of --db")
     p.add_argument("--method", choices=sorted(methods), default=default_method,
                    help=f"registration method (default {default_method})")
+    # the options of a command that recognises (alike in shape to show's by design, each its own help)
     p.add_argument("--seed", type=count(0), default=0, help="next's seed where a request gives none (default 0)")
     mesh_options(p)
     p.add_argument("--quiet", action="store_true", help="nothing on standard error but errors")

@@ -178,6 +178,7 @@ def add_show_parser(sub, *, count, mesh_options, methods, default_method):
                    "instead of proposing again (with --result and no --next, no proposal is drawn)")
     p.add_argument("--shown", type=count(1), default=5, metavar="N",
                    help="how many registered models, best first, the side panel offers (default 5)")
+    # the options of a command that recognises (alike in shape to serve's by design, each its own help)
     p.add_argument("--method", choices=sorted(methods), default=default_method,
                    help=f"registration method (default {default_method})")
     p.add_argument("--seed", type=count(0), default=0, help="the proposal's seed, for a session (default 0)")

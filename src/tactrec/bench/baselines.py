@@ -31,7 +31,7 @@ from ..errors import InputError
 from ..estimation import estimate
 from ..registration import mesh_fast
 from .common import recognizer, run_parallel, write_json
-from .fast_vs_paper import PROTOCOLS, _database, _simulate
+from .common import PROTOCOLS, database, simulate
 
 __all__ = ["run", "open3d", "METHODS"]
 
@@ -135,9 +135,9 @@ def _recognise_with(o3d, method, db, touch, *, seed):
 def _touch(task):
     models, m_index, instance, seed, protocol, methods = task
     o3d = open3d()
-    db = _database(models)
+    db = database(models)
     entry = db.entries[m_index]
-    site, touch = _simulate(entry, m_index, instance, seed, protocol)
+    site, touch = simulate(entry, m_index, instance, seed, protocol)
     results = {}
     for method in methods:
         if method == "fast":

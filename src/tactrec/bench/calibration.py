@@ -39,7 +39,8 @@ from ..probability import Evidence, residuals
 from ..registration.solver import Criteria, solve
 from ..surfaces import BUILTIN_SETS
 from ..units import conversion
-from .common import CORE_SOURCES, recognizer, run_parallel, saved_record, sources_hash, write_json
+from .common import (CORE_SOURCES, database, recognizer, run_parallel, saved_record, simulate, sources_hash,
+                     vertex_touch, write_json, ycb_database)
 
 __all__ = ["run", "SETS", "expected_calibration_error", "reliability"]
 
@@ -49,7 +50,7 @@ ECE_TARGET, SURE, SURE_RIGHT = 0.05, 0.95, 0.95
 
 
 def _code_hash() -> str:
-    return sources_hash(*CORE_SOURCES, "bench/fast_vs_paper.py", "bench/scale.py")
+    return sources_hash(*CORE_SOURCES, "bench/fast_vs_paper.py", "bench/common.py", "bench/scale.py")
 
 
 def expected_calibration_error(confidence, correct, *, bins: int = 10) -> float:
@@ -101,23 +102,20 @@ def scored(record: dict) -> dict:
 
 
 def _hard(task) -> dict:
-    from .fast_vs_paper import _database, _simulate
 
     models, m_index, instance, seed = task
-    db = _database(models)
+    db = database(models)
     entry = db.entries[m_index]
-    site, touch = _simulate(entry, m_index, instance, seed, "hard")
+    site, touch = simulate(entry, m_index, instance, seed, "hard")
     return _record(entry, touch, recognizer(db.entries).recognize(touch), {"set": "hard", "instance": instance,
                                                                            "site": site})
 
 
 def _p3_78(task) -> dict:
-    from . import scale
-
     m_index, instance, seed = task
-    db = scale._database()
+    db = ycb_database()
     entry = db.entries[m_index]
-    vertex, touch = scale._touch(entry, m_index, instance, seed)
+    vertex, touch = vertex_touch(entry, m_index, instance, seed)
     return _record(entry, touch, recognizer(db.entries).recognize(touch), {"set": "p3-78", "instance": instance,
                                                                            "site": [vertex]})
 

@@ -27,7 +27,7 @@ from ..io.atomic import write_text_atomic
 from ..io.touch import save_touch
 from ..surfaces import BUILTIN_SETS
 from .common import spread, write_json
-from .fast_vs_paper import _database, _simulate
+from .common import database, simulate
 
 __all__ = ["run", "TIPS"]
 
@@ -56,7 +56,7 @@ def run(*, out, instances: int = 10, seed: int = 0, quiet: bool = False, **_igno
     models = BUILTIN_SETS["paper-fig11"]
     db_path = out / "cold-start.db"
     build_database(models, db_path, quiet=True)
-    db = _database(tuple(models))
+    db = database(tuple(models))
     rows = []
     for tip in (0.0,) + TIPS:
         for k in range(instances):
@@ -66,7 +66,7 @@ def run(*, out, instances: int = 10, seed: int = 0, quiet: bool = False, **_igno
             path = out / "cold-start.touches" / f"{kind}-{entry.name}-{instance}-s{seed}.json"
             path.parent.mkdir(parents=True, exist_ok=True)
             sensor = Imperfections(tip_radius=tip) if tip > 0 else None
-            save_touch(_simulate(entry, m_index, instance, seed, "p3", sensor)[1], path)
+            save_touch(simulate(entry, m_index, instance, seed, "p3", sensor)[1], path)
             result, wall = _recognized(path, db_path)
             rows.append({"file": path.name, "model": entry.name, "tip": tip, "recognized": result["best"],
                          "seconds": result["seconds"], "wall": wall})

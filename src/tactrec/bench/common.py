@@ -1,4 +1,9 @@
-"""Shared machinery of the benchmarks: seeding, worker processes, output."""
+"""Shared machinery of the benchmarks: seeding, the sets and touches they share, worker processes, output.
+
+The touches of ``fast-vs-paper`` (:data:`PROTOCOLS`, :func:`simulate`) and the P3 touch of the 78-scan
+benches (:func:`vertex_touch`) are made here, with the databases they run on (:func:`database`,
+:func:`ycb_database`), so that every bench and test that reuses them imports them from one place.
+"""
 
 from __future__ import annotations
 
@@ -17,10 +22,21 @@ from ..io.atomic import write_text_atomic
 
 __all__ = ["spread", "paper_values", "instance_rng", "random_face_site", "run_parallel", "write_json", "default_jobs",
            "sources_hash", "saved_record", "recognizer", "CORE_SOURCES", "errors_on_every_model", "error_cell", "SCANS",
-           "scan_database", "within_noise"]
+           "scan_database", "within_noise", "PROTOCOLS", "SPACING", "database", "simulate", "scan_set", "ycb_database",
+           "vertex_touch"]
 
-#: the recognizers a benchmark process keeps, by models and options (their worker processes end with it)
-_RECOGNIZERS: dict = {}
+#: a cache: the recognizers a benchmark process keeps, by models and options (their worker processes end with it)
+_RECOGNIZER_CACHE: dict = {}
+#: a cache: the databases a benchmark process keeps, prepared, by the models' names
+_DATABASE_CACHE: dict = {}
+
+#: the points' spacing of every bench touch, mm
+SPACING = 0.3
+#: the two protocols of ``fast-vs-paper`` and the benches that reuse its touches (:func:`simulate`)
+PROTOCOLS = {
+    "p3": {"length": 24.0, "angle": 60.0, "noise": 0.0, "outward": True, "site": "vertex"},
+    "hard": {"length": 12.0, "angle": 30.0, "noise": 0.05, "outward": False, "site": "face"},
+}
 
 
 def recognizer(models, *, method: str = "fast", calibrated: bool = False, **options):
@@ -30,11 +46,101 @@ def recognizer(models, *, method: str = "fast", calibrated: bool = False, **opti
     from ..recognition import Recognizer, default_workers
 
     key = (tuple(id(e) for e in models), method, calibrated, tuple(sorted(options.items())))
-    if key not in _RECOGNIZERS:
+    if key not in _RECOGNIZER_CACHE:
         chance = null_model(models) if calibrated else None
-        _RECOGNIZERS[key] = (Recognizer(models, method=method, workers=default_workers(), chance=chance, **options),
-                             list(models))
-    return _RECOGNIZERS[key][0]
+        _RECOGNIZER_CACHE[key] = (Recognizer(models, method=method, workers=default_workers(), chance=chance,
+                                             **options), list(models))
+    return _RECOGNIZER_CACHE[key][0]
+
+
+def database(models: tuple[str, ...]):
+    """The built-in ``models`` (or those of :mod:`.other_scans` and :mod:`.cad_parts`) with their
+    tables, each prepared for the search once (not charged to a recognition), kept for the rest of
+    this process."""
+    if models not in _DATABASE_CACHE:
+        from ..database import build_entries
+        from ..registration import mesh_fast
+        from .cad_parts import CAD
+        from .other_scans import OTHER, other_database
+
+        db = other_database(models) if set(models) <= set(OTHER) | set(CAD) else build_entries(models)
+        for entry in db.entries:
+            mesh_fast.prepare(entry.model)
+        _DATABASE_CACHE[models] = db
+    return _DATABASE_CACHE[models]
+
+
+def ycb_database():
+    """All 78 YCB scans (built once into the cache folder), prepared, kept for the rest of this process."""
+    if ("ycb",) not in _DATABASE_CACHE:
+        from ..database import cached_database
+        from ..registration import mesh_fast
+
+        db = cached_database(("ycb",), name="ycb")
+        for entry in db.entries:
+            mesh_fast.prepare(entry.model)
+        _DATABASE_CACHE[("ycb",)] = db
+    return _DATABASE_CACHE[("ycb",)]
+
+
+def simulate(entry, m_index: int, instance: int, seed: int, protocol: str, imperfections=None):
+    """A touch of ``protocol`` (:data:`PROTOCOLS`) on ``entry`` (its site and the data), recorded by a
+    sensor with ``imperfections`` (:class:`tactrec.sensor.Imperfections`; None: a perfect one)."""
+    from ..simulation import simulate_touch, spread_vertices
+
+    spec = PROTOCOLS[protocol]
+    rng = instance_rng(seed, m_index, instance, 1 if protocol == "hard" else 0)
+    points = int(round(spec["length"] / SPACING)) + 1
+    options = dict(points=points, spacing=SPACING, angle=spec["angle"], noise=spec["noise"], noise_kind="gaussian",
+                   outward=spec["outward"], imperfections=imperfections)
+    model = entry.model
+    if spec["site"] == "vertex":       # a vertex whose sections reach the curves' length: the instance's, or the next
+        for k in range(instance, instance + 50):
+            vertices = spread_vertices(model, k + 1, rings=15, rng=instance_rng(seed, m_index))
+            if k >= len(vertices) and k > instance:
+                break
+            site = [int(vertices[min(k, len(vertices) - 1)])]
+            try:
+                return site, simulate_touch(model, site, rng=rng, **options)
+            except ValueError:
+                continue
+        raise RuntimeError(f"no vertex of {model.name} takes a {spec['length']} mm touch")
+    for _ in range(50):                           # a face whose sections reach the curves' length
+        site = random_face_site(model, rng)
+        try:
+            return site, simulate_touch(model, site, rng=rng, **options)
+        except ValueError:
+            continue
+    raise RuntimeError(f"no face of {model.name} takes a {spec['length']} mm touch")
+
+
+def vertex_touch(entry, m_index: int, instance: int, seed: int):
+    """The P3 touch of the 78-scan benches on ``entry``: a vertex (no two instances within 15 rings),
+    three 24 mm curves 60 degrees apart (81 points), in a sensor frame: ``(vertex, data)``."""
+    from ..simulation import simulate_touch, spread_vertices
+
+    vertices = spread_vertices(entry.model, instance + 1, rings=15, rng=instance_rng(seed, m_index))
+    vertex = int(vertices[min(instance, len(vertices) - 1)])
+    touch = simulate_touch(entry.model, [vertex], points=81, spacing=SPACING, angle=60.0,
+                           rng=instance_rng(seed, m_index, instance))
+    return vertex, touch
+
+
+def scan_set(models, scans: str | None, bench: str) -> tuple[tuple[str, ...], str]:
+    """The models a bench on the fast-vs-paper touches runs on (the ten YCB scans of Fig. 11 unless
+    given; with ``scans="other"`` the meshes of :mod:`tactrec.bench.other_scans`, with ``"cad"`` the
+    machined parts of :mod:`tactrec.bench.cad_parts`) and the name of its output files."""
+    from ..errors import InputError
+    from ..surfaces import BUILTIN_SETS
+
+    if scans in ("other", "cad"):
+        from .cad_parts import CAD
+        from .other_scans import OTHER
+
+        return tuple(models or (OTHER if scans == "other" else CAD)), f"{bench}-{scans}"
+    if scans not in (None, "shipped"):
+        raise InputError(f"{bench} runs on the shipped scans or on 'other' or 'cad' ones, not {scans!r}", "--scans")
+    return tuple(models or BUILTIN_SETS["paper-fig11"]), bench
 
 
 #: the kinds of scan a benchmark runs on: as shipped, or made like the paper's
@@ -140,9 +246,9 @@ def _default(obj):
 
 
 #: the sources every recognition depends on (files, or folders of ``.py`` files, relative to the package)
-CORE_SOURCES = ("io", "estimation.py", "features.py", "linalg.py", "simulation.py", "tables.py", "recognition.py",
+CORE_SOURCES = ("io", "estimation.py", "features.py", "linalg.py", "simulation.py", "tables.py", "recognition",
                 "runner.py", "tip.py", "outliers.py", "probability.py", "bootstrap.py", "chance", "surfaces", "registration",
-                "methods", "engine")
+                "methods", "engine", "compiled.py", "missed.py", "normal_scales.py", "units.py", "errors.py")
 
 
 def null_model(entries):

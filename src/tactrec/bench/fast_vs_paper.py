@@ -28,23 +28,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ..database import build_entries
 from ..errors import InputError
 from ..probability import fit_limit
 from ..recognition import FLOOR
-from ..registration import mesh_fast
-from ..simulation import simulate_touch, spread_vertices
-from ..surfaces import BUILTIN_SETS
-from .common import (CORE_SOURCES, instance_rng, random_face_site, recognizer, run_parallel, saved_record,
-                     sources_hash, write_json)
+from .common import (CORE_SOURCES, PROTOCOLS, SPACING, database, recognizer, run_parallel, saved_record, scan_set,
+                     simulate, sources_hash, write_json)
 
-__all__ = ["run", "PROTOCOLS", "METHODS"]
+__all__ = ["run", "PROTOCOLS", "SPACING", "METHODS", "scan_set"]
 
-SPACING = 0.3
-PROTOCOLS = {
-    "p3": {"length": 24.0, "angle": 60.0, "noise": 0.0, "outward": True, "site": "vertex"},
-    "hard": {"length": 12.0, "angle": 30.0, "noise": 0.05, "outward": False, "site": "face"},
-}
 METHODS = ("fast", "paper")
 #: a right answer is located when its contact lies this near the truth (mm), or its pose fits as well as
 #: the truth's (a symmetric object's other places)
@@ -52,55 +43,11 @@ LOCATED_MM = 1.0
 #: the paper's P3 at its defaults (Fig. 11)
 PAPER = {"success_percent": 93, "seconds": 115}
 
-_DB = {}
-
-
-def _database(models: tuple[str, ...]):
-    if models not in _DB:
-        from .cad_parts import CAD
-        from .other_scans import OTHER, other_database
-
-        db = other_database(models) if set(models) <= set(OTHER) | set(CAD) else build_entries(models)
-        for entry in db.entries:                 # one-off per model, not charged to a recognition
-            mesh_fast.prepare(entry.model)
-        _DB[models] = db
-    return _DB[models]
-
-
-def _simulate(entry, m_index: int, instance: int, seed: int, protocol: str, imperfections=None):
-    """A touch of ``protocol`` on ``entry`` (its site and the data), recorded by a sensor with
-    ``imperfections`` (:class:`tactrec.sensor.Imperfections`; None: a perfect one)."""
-    spec = PROTOCOLS[protocol]
-    rng = instance_rng(seed, m_index, instance, 1 if protocol == "hard" else 0)
-    points = int(round(spec["length"] / SPACING)) + 1
-    options = dict(points=points, spacing=SPACING, angle=spec["angle"], noise=spec["noise"], noise_kind="gaussian",
-                   outward=spec["outward"], imperfections=imperfections)
-    model = entry.model
-    if spec["site"] == "vertex":       # a vertex whose sections reach the curves' length: the instance's, or the next
-        for k in range(instance, instance + 50):
-            vertices = spread_vertices(model, k + 1, rings=15, rng=instance_rng(seed, m_index))
-            if k >= len(vertices) and k > instance:
-                break
-            site = [int(vertices[min(k, len(vertices) - 1)])]
-            try:
-                return site, simulate_touch(model, site, rng=rng, **options)
-            except ValueError:
-                continue
-        raise RuntimeError(f"no vertex of {model.name} takes a {spec['length']} mm touch")
-    for _ in range(50):                           # a face whose sections reach the curves' length
-        site = random_face_site(model, rng)
-        try:
-            return site, simulate_touch(model, site, rng=rng, **options)
-        except ValueError:
-            continue
-    raise RuntimeError(f"no face of {model.name} takes a {spec['length']} mm touch")
-
-
 def _touch(task):
     models, m_index, instance, seed, protocol, methods = task
-    db = _database(models)
+    db = database(models)
     entry = db.entries[m_index]
-    site, touch = _simulate(entry, m_index, instance, seed, protocol)
+    site, touch = simulate(entry, m_index, instance, seed, protocol)
     truth = np.asarray(touch.meta["truth"]["contact"])
     results = {}
     for method in methods:
@@ -128,23 +75,9 @@ def _touch(task):
     return {"model": entry.name, "protocol": protocol, "instance": instance, "site": site, "results": results}
 
 
-def scan_set(models, scans: str | None, bench: str) -> tuple[tuple[str, ...], str]:
-    """The models a bench on the fast-vs-paper touches runs on (the ten YCB scans of Fig. 11 unless
-    given; with ``scans="other"`` the meshes of :mod:`tactrec.bench.other_scans`, with ``"cad"`` the
-    machined parts of :mod:`tactrec.bench.cad_parts`) and the name of its output files."""
-    if scans in ("other", "cad"):
-        from .cad_parts import CAD
-        from .other_scans import OTHER
-
-        return tuple(models or (OTHER if scans == "other" else CAD)), f"{bench}-{scans}"
-    if scans not in (None, "shipped"):
-        raise InputError(f"{bench} runs on the shipped scans or on 'other' or 'cad' ones, not {scans!r}", "--scans")
-    return tuple(models or BUILTIN_SETS["paper-fig11"]), bench
-
-
 def _code_hash() -> str:
     """Hash of the sources a record depends on."""
-    return sources_hash(*CORE_SOURCES, "bench/fast_vs_paper.py")
+    return sources_hash(*CORE_SOURCES, "bench/fast_vs_paper.py", "bench/common.py")
 
 
 def _touch_saved(job):

@@ -41,13 +41,13 @@ from ..registration.solver import Criteria, solve
 from ..registration.result import apply_poses
 from ..units import conversion
 from .common import CORE_SOURCES, recognizer, run_parallel, saved_record, sources_hash, write_json
-from .fast_vs_paper import PROTOCOLS, _database, _simulate, scan_set
+from .common import PROTOCOLS, database, scan_set, simulate
 
 __all__ = ["run"]
 
 
 def _code_hash() -> str:
-    return sources_hash(*CORE_SOURCES, "bench/fast_vs_paper.py", "bench/fit_limit.py")
+    return sources_hash(*CORE_SOURCES, "bench/fast_vs_paper.py", "bench/common.py", "bench/fit_limit.py")
 
 
 def paired_gap(winner: np.ndarray, truth: np.ndarray) -> float:
@@ -68,9 +68,9 @@ def paired_gap(winner: np.ndarray, truth: np.ndarray) -> float:
 
 def _touch(task) -> dict:
     models, m_index, instance, seed, protocol = task
-    db = _database(models)
+    db = database(models)
     entry = db.entries[m_index]
-    site, touch = _simulate(entry, m_index, instance, seed, protocol)
+    site, touch = simulate(entry, m_index, instance, seed, protocol)
     rec = recognizer(db.entries).recognize(touch)
     errors = {r.model: r.error / r.scale for r in rec.ranking if r.ok}
     truth = touch.meta["truth"]

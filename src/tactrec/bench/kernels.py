@@ -23,7 +23,7 @@ from ..io.atomic import write_text_atomic
 from ..io.touch import save_touch
 from ..surfaces import BUILTIN_SETS
 from .common import write_json
-from .fast_vs_paper import PROTOCOLS, _database, _simulate
+from .common import PROTOCOLS, database, simulate
 
 __all__ = ["run", "KERNELS", "CONTACT_MM"]
 
@@ -34,14 +34,14 @@ CONTACT_MM = 0.1
 
 def _touch_files(folder: Path, models, instances: int, seed: int, protocols) -> list[Path]:
     folder.mkdir(parents=True, exist_ok=True)
-    db = _database(models)
+    db = database(models)
     paths = []
     for protocol in protocols:
         for m_index, entry in enumerate(db.entries):
             for i in range(instances):
                 path = folder / f"{protocol}-{entry.name}-{i}-s{seed}.json"
                 if not path.exists():
-                    save_touch(_simulate(entry, m_index, i, seed, protocol)[1], path)
+                    save_touch(simulate(entry, m_index, i, seed, protocol)[1], path)
                 paths.append(path)
     return paths
 
@@ -63,7 +63,7 @@ def _child(listing: str) -> None:
     from ..recognition import Recognizer, default_workers
 
     job = json.loads(Path(listing).read_text(encoding="utf-8"))
-    db = _database(tuple(job["models"]))
+    db = database(tuple(job["models"]))
     with Recognizer(db.entries, workers=default_workers()) as recognizer:
         for path in job["paths"]:
             r = recognizer.recognize(load_touch(path))

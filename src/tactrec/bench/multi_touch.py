@@ -87,13 +87,13 @@ from ..features import Touch
 from ..io.atomic import write_text_atomic
 from ..io.session import MissedLine
 from ..session.fit import per_touch
-from ..session.lines import first_hit
+from ..missed import first_hit
 from ..session.result import Hypothesis
 from ..simulation import random_rigid_motion, sensor_to_world, simulate_world_touch
 from ..surfaces import BUILTIN_SETS
 from . import multi_touch_report as report
-from .common import (CORE_SOURCES, instance_rng, null_model, random_face_site, recognizer, run_parallel, saved_record,
-                     sources_hash, write_json)
+from .common import (CORE_SOURCES, database, instance_rng, null_model, random_face_site, recognizer, run_parallel,
+                     saved_record, simulate, sources_hash, vertex_touch, write_json, ycb_database)
 
 __all__ = ["run", "SETS", "TOUCHES", "STRATEGIES", "SIMILAR", "similar_scans", "shape_signature"]
 
@@ -118,12 +118,12 @@ ATTEMPTS = 60
 DRAWS = 3000
 
 
-def _code_hash(strategy: str) -> str:
+def code_hash(strategy: str) -> str:
     """The sources a strategy's sessions run: random places never ask for a proposal, so a change
     to :mod:`tactrec.proposal` reruns ``next``'s sessions alone."""
     proposal = ("proposal",) if strategy == "next" else ()
     return sources_hash(*CORE_SOURCES, "session", *proposal, "probability.py", "bench/multi_touch.py",
-                        "bench/fast_vs_paper.py", "bench/scale.py", "bench/near_duplicates.py")
+                        "bench/fast_vs_paper.py", "bench/common.py", "bench/scale.py", "bench/near_duplicates.py")
 
 
 def shape_signature(model) -> np.ndarray:
@@ -147,45 +147,39 @@ def similar_scans(entries, m_index: int, count: int = SIMILAR) -> list[int]:
     return sorted(int(i) for i in np.argsort(d, kind="stable")[:count])
 
 
-_SIGNATURES: dict = {}
-_FAMILIES: dict = {}
+#: a cache: each scan's shape signature, by name
+_SIGNATURE_CACHE: dict = {}
+#: a cache: each near-duplicates pair, by scan
+_FAMILY_CACHE: dict = {}
 
 
 def _signature(entry) -> np.ndarray:
-    if entry.name not in _SIGNATURES:
-        _SIGNATURES[entry.name] = shape_signature(entry.model)
-    return _SIGNATURES[entry.name]
+    if entry.name not in _SIGNATURE_CACHE:
+        _SIGNATURE_CACHE[entry.name] = shape_signature(entry.model)
+    return _SIGNATURE_CACHE[entry.name]
 
 
 def _first(kind: str, m_index: int, instance: int, seed: int):
     """The set's database (its entries), the touched entry and the protocol's first touch."""
     if kind == "hard-10":
-        from .fast_vs_paper import _database, _simulate
-
-        db = _database(tuple(BUILTIN_SETS["paper-fig11"]))
+        db = database(tuple(BUILTIN_SETS["paper-fig11"]))
         entry = db.entries[m_index]
-        return db.entries, entry, _simulate(entry, m_index, instance, seed, "hard")[1]
+        return db.entries, entry, simulate(entry, m_index, instance, seed, "hard")[1]
     if kind == "near-duplicates":
         from . import near_duplicates
-        from .fast_vs_paper import _database
-
-        db = _database(tuple(BUILTIN_SETS["paper-fig11"]))
-        entries, centre = near_duplicates.family(db.entries[m_index], m_index, seed, _FAMILIES)
+        db = database(tuple(BUILTIN_SETS["paper-fig11"]))
+        entries, centre = near_duplicates.family(db.entries[m_index], m_index, seed, _FAMILY_CACHE)
         entry, first = near_duplicates.first_touch(entries, centre, m_index, instance, seed, SPECS[kind], SPACING)
         return entries, entry, first
-    from . import scale
-
-    db = scale._database()
+    db = ycb_database()
     entry = db.entries[m_index]
     if kind == "similar":
-        from .fast_vs_paper import _simulate
-
         chosen = [db.entries[i] for i in similar_scans(db.entries, m_index)]
-        return chosen, entry, _simulate(entry, m_index, instance, seed, "hard")[1]
-    return db.entries, entry, scale._touch(entry, m_index, instance, seed)[1]
+        return chosen, entry, simulate(entry, m_index, instance, seed, "hard")[1]
+    return db.entries, entry, vertex_touch(entry, m_index, instance, seed)[1]
 
 
-def _next_touch(strategy, session, entry, world2model, spec, rng):
+def next_touch(strategy, session, entry, world2model, spec, rng):
     """The next touch's data and ``sensor2world`` pose, the approach line where ``next``'s met nothing on
     the true object, or None (nothing to propose / no place).  A place
     whose simulated touch the estimator rejects (curves tangent at the contact, say) is no place: a
@@ -233,7 +227,7 @@ def _next_touch(strategy, session, entry, world2model, spec, rng):
     return None
 
 
-def _truth(session, entry, world2model) -> dict:
+def truth_of(session, entry, world2model) -> dict:
     """What :func:`tactrec.bench.multi_touch_report.truth_found` weighs, over the touches the session
     keeps: the true pose ``world2model``'s points-weighted mean distance (``fit``), the session's pose
     of the true model's (``found``; None without one), the points-weighted mean of the touches'
@@ -288,11 +282,11 @@ def _run_session(task, recognizer_, entry, first) -> dict:
                       "evidence": None if result.evidence is None else result.evidence.to_json(),
                       "own_seconds": None if isinstance(touch, MissedLine) else session.records[-1].own.seconds,
                       "missed": isinstance(touch, MissedLine), "stages": dict(result.stages),
-                      "truth": _truth(session, entry, world2model)})
+                      "truth": truth_of(session, entry, world2model)})
         if len(steps) >= TOUCHES:
             break
         start = time.perf_counter()
-        found = _next_touch(strategy, session, entry, world2model, spec, rng)
+        found = next_touch(strategy, session, entry, world2model, spec, rng)
         steps[-1]["propose_seconds"] = time.perf_counter() - start
         if found is None:
             break
@@ -305,7 +299,7 @@ def _saved(job):
     return saved_record(folder / f"{task[0]}-{task[1]}-{task[2]}-s{task[3]}.json", lambda: _session(task))
 
 
-def _merged(records: list[dict]) -> list[dict]:
+def merged(records: list[dict]) -> list[dict]:
     """One row per session (set, scan, instance) with every strategy's steps, in first-seen order."""
     rows: dict = {}
     for r in records:
@@ -324,7 +318,7 @@ def run(*, out, instances: int = 10, seed: int = 0, jobs: int | None = None, qui
     if not strategies:
         raise ValueError(f"no strategy to run; known: {', '.join(STRATEGIES)}")
     out = Path(out)
-    folders = {s: out / "multi-touch.parts" / f"{s}-{_code_hash(s)}" for s in strategies}
+    folders = {s: out / "multi-touch.parts" / f"{s}-{code_hash(s)}" for s in strategies}
     for folder in folders.values():
         folder.mkdir(parents=True, exist_ok=True)
     tasks = []
@@ -337,7 +331,7 @@ def run(*, out, instances: int = 10, seed: int = 0, jobs: int | None = None, qui
     jobs_ = [(t + (strategy,), folders[strategy]) for t in tasks for strategy in strategies]
     for kind, m in sorted({t[:2] for t in tasks if t[0] in CALIBRATED}):       # fitted once, before the workers
         _null(kind, _first(kind, m, 0, seed)[0])
-    records = _merged(run_parallel(_saved, jobs_, jobs=jobs or 1, quiet=quiet, desc="multi-touch"))
+    records = merged(run_parallel(_saved, jobs_, jobs=jobs or 1, quiet=quiet, desc="multi-touch"))
     by_set = {s: [r for r in records if r["set"] == s] for s in sets}
     table = {"benchmark": "multi-touch", "instances": instances, "seed": seed, "radius_mm": RADIUS,
              "strategies": list(strategies), "touches": TOUCHES,

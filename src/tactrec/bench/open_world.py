@@ -70,7 +70,7 @@ FIT_TEST = ", fit test alone"
 
 
 def _code_hash() -> str:
-    return sources_hash(*CORE_SOURCES, "session", "bench/fast_vs_paper.py", "bench/multi_touch.py",
+    return sources_hash(*CORE_SOURCES, "session", "bench/fast_vs_paper.py", "bench/common.py", "bench/multi_touch.py",
                         "bench/open_world.py")
 
 
@@ -89,13 +89,13 @@ def _recognized(rec) -> dict:
 
 
 def _touch(task) -> dict:
-    from .fast_vs_paper import _database, _simulate
+    from .common import database, simulate
 
     scans, m_index, instance, seed, protocol = task
     models = _models(scans)
-    db = _database(models)
+    db = database(models)
     entry = db.entries[m_index]
-    site, touch = _simulate(entry, m_index, instance, seed, protocol)
+    site, touch = simulate(entry, m_index, instance, seed, protocol)
     r = recognizer(db.entries)
     others = [m for m in models if m != entry.name]
     return {"kind": "touch", "scans": scans, "protocol": protocol, "model": entry.name, "instance": instance,
@@ -106,13 +106,13 @@ def _touch(task) -> dict:
 def _session(task) -> dict:
     """A session of the ``hard`` protocol on scan ``m_index``, recognised without it."""
     from ..recognition import Recognizer, default_workers
-    from .fast_vs_paper import _database, _simulate
-    from .multi_touch import SPECS, _next_touch
+    from .common import database, simulate
+    from .multi_touch import SPECS, next_touch
 
     scans, m_index, instance, seed = task
-    db = _database(_models(scans))
+    db = database(_models(scans))
     entry = db.entries[m_index]
-    first = _simulate(entry, m_index, instance, seed, "hard")[1]
+    first = simulate(entry, m_index, instance, seed, "hard")[1]
     Rw, tw = random_rigid_motion(instance_rng(seed, m_index, instance, 77), extent=200.0)
     world2model = (Rw.T, -Rw.T @ tw, 1.0)
     rng = instance_rng(seed, m_index, instance, 91)
@@ -127,7 +127,7 @@ def _session(task) -> dict:
                           "evidence": None if result.evidence is None else result.evidence.to_json()})
             if len(steps) >= SESSION_TOUCHES:
                 break
-            found = _next_touch("random", session, entry, world2model, SPECS["hard-10"], rng)
+            found = next_touch("random", session, entry, world2model, SPECS["hard-10"], rng)
             if found is None:
                 break
             touch, pose = found
@@ -221,10 +221,10 @@ def run(*, out, instances: int = 5, seed: int = 0, jobs: int | None = None, quie
         tasks += [(scans, m, i, seed, p) for p in PROTOCOLS for m in range(n) for i in range(instances)]
         tasks += [(scans, m, i, seed) for m in range(n) for i in range(math.ceil(instances / 5))]
     records = run_parallel(_saved, [(t, folder) for t in tasks], jobs=jobs or 1, quiet=quiet, desc="open-world")
-    from .fast_vs_paper import _database
+    from .common import database
 
     summary = {}
-    for label, nulls in (("", {s: null_model(_database(_models(s)).entries) for s in sets}), (FIT_TEST, {})):
+    for label, nulls in (("", {s: null_model(database(_models(s)).entries) for s in sets}), (FIT_TEST, {})):
         for scans in sets:
             for p in PROTOCOLS:
                 rows = [r for r in records if r["kind"] == "touch" and r["scans"] == scans and r["protocol"] == p]

@@ -21,6 +21,7 @@ the output's name lists them.
 
 from __future__ import annotations
 
+import functools
 import time
 from pathlib import Path
 
@@ -37,14 +38,10 @@ __all__ = ["run_table2", "run_table3", "CONFIG"]
 SURFACES = BUILTIN_SETS["paper-table1"]
 CONFIG = {"points": 61, "spacing": 0.02, "angle": 60.0, "noise": 0.001, "noise_kind": "uniform"}
 
-_DB = None
-
-
+@functools.lru_cache(maxsize=1)
 def _database():
-    global _DB
-    if _DB is None:
-        _DB = build_entries(SURFACES)
-    return _DB
+    """The four surfaces with their tables, kept for the rest of this process."""
+    return build_entries(SURFACES)
 
 
 def _touch(task):
@@ -101,15 +98,23 @@ def _fig8(records, out: Path, name: str) -> Path:
     return path
 
 
+def _table(table: str, only_own: bool, *, out, instances: int, seed: int, jobs, quiet: bool, method: str,
+           options: dict | None):
+    """What Table 2 and Table 3 both start from: the output folder, the method's readings, the output's
+    stem, the records of the touches (each recognised against its own surface alone, ``only_own``, or
+    all four) and the paper's values of ``table``."""
+    options, suffix = paper_options(options, method)
+    stem = f"paper-{table}{suffix}"
+    records = _run(instances=instances, seed=seed, jobs=jobs, quiet=quiet, method=method, only_own=only_own,
+                   desc=stem, options=options)
+    return Path(out), options, stem, records, paper_values()[table]
+
+
 def run_table2(*, out, instances: int = 10, seed: int = 0, jobs: int | None = None, quiet: bool = False,
                method: str = "paper", options: dict | None = None) -> dict:
     """P1: localisation error per surface (paper Table 2 and Fig. 8)."""
-    out = Path(out)
-    options, suffix = paper_options(options, method)
-    stem = f"paper-table2{suffix}"
-    records = _run(instances=instances, seed=seed, jobs=jobs, quiet=quiet, method=method, only_own=True,
-                   desc=stem, options=options)
-    paper = paper_values()["table2"]
+    out, options, stem, records, paper = _table("table2", True, instances=instances, seed=seed, jobs=jobs,
+                                                quiet=quiet, method=method, options=options, out=out)
     rows = {}
     for name in SURFACES:
         errs = np.array([r["location_error"] if r["location_error"] is not None else np.inf
@@ -123,6 +128,7 @@ def run_table2(*, out, instances: int = 10, seed: int = 0, jobs: int | None = No
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / f"{stem}.json", table)
     table["plots"] = [str(_fig8(records, out, stem))]
+    # Table 2's and Table 3's printed tables are alike in shape by design, each with the paper's columns
     lines = [f"P1 / Table 2: |p - p*| over {instances} instances per surface "
              f"(method {method}{readings_text(options)}, seed {seed})",
              f"{'surface':22s} {'min':>8s} {'max':>8s} {'mean':>8s}   paper: {'min':>7s} {'max':>7s} {'mean':>7s}"
@@ -138,12 +144,8 @@ def run_table2(*, out, instances: int = 10, seed: int = 0, jobs: int | None = No
 def run_table3(*, out, instances: int = 10, seed: int = 0, jobs: int | None = None, quiet: bool = False,
                method: str = "paper", options: dict | None = None) -> dict:
     """P2: recognition among the four surfaces (paper Table 3)."""
-    out = Path(out)
-    options, suffix = paper_options(options, method)
-    stem = f"paper-table3{suffix}"
-    records = _run(instances=instances, seed=seed, jobs=jobs, quiet=quiet, method=method, only_own=False,
-                   desc=stem, options=options)
-    paper = paper_values()["table3"]
+    out, options, stem, records, paper = _table("table3", False, instances=instances, seed=seed, jobs=jobs,
+                                                quiet=quiet, method=method, options=options, out=out)
     rows = {}
     excess = []
     for name in SURFACES:
@@ -174,6 +176,7 @@ def run_table3(*, out, instances: int = 10, seed: int = 0, jobs: int | None = No
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / f"{stem}.json", table)
     table["plots"] = [str(_fig8(records, out, stem))]
+    # alike in shape to Table 2's printed table by design, with Table 3's columns
     lines = [f"P2 / Table 3: recognition among {len(SURFACES)} surfaces, {instances} instances each "
              f"(method {method}{readings_text(options)}, seed {seed})",
              f"{'surface':22s} {'correct':>8s} {'lookup':>7s} {'search':>7s}   paper: {'lookup':>6s} {'search':>6s}"

@@ -21,40 +21,16 @@ from pathlib import Path
 
 import numpy as np
 
-from ..database import cached_database
-from ..registration import mesh_fast
-from ..simulation import simulate_touch, spread_vertices
 from ..surfaces import ycb_names
-from .common import instance_rng, recognizer, run_parallel, saved_record, write_json
+from .common import instance_rng, recognizer, run_parallel, saved_record, vertex_touch, write_json, ycb_database
 from .fast_vs_paper import _code_hash
 
 __all__ = ["run_scale", "run_exhaustive", "SIZES"]
 
 SIZES = (10, 20, 40, 78)
-SPACING = 0.3
-
-_DB = {}
-
-
-def _database():
-    if "db" not in _DB:
-        db = cached_database(("ycb",), name="ycb")
-        for entry in db.entries:
-            mesh_fast.prepare(entry.model)
-        _DB["db"] = db
-    return _DB["db"]
-
 
 def _order(seed: int, count: int) -> list[int]:
     return [int(i) for i in instance_rng(seed, 78_078).permutation(count)]
-
-
-def _touch(entry, m_index: int, instance: int, seed: int):
-    vertices = spread_vertices(entry.model, instance + 1, rings=15, rng=instance_rng(seed, m_index))
-    vertex = int(vertices[min(instance, len(vertices) - 1)])
-    touch = simulate_touch(entry.model, [vertex], points=81, spacing=SPACING, angle=60.0,
-                           rng=instance_rng(seed, m_index, instance))
-    return vertex, touch
 
 
 def _outcome(rec, name: str) -> dict:
@@ -66,11 +42,11 @@ def _outcome(rec, name: str) -> dict:
 
 def _scale_task(task):
     m_index, instance, seed, sizes = task
-    db = _database()
+    db = ycb_database()
     entries = db.entries
     order = _order(seed, len(entries))
     entry = entries[m_index]
-    vertex, touch = _touch(entry, m_index, instance, seed)
+    vertex, touch = vertex_touch(entry, m_index, instance, seed)
     record = {"model": entry.name, "vertex": vertex, "instance": instance,
               "all": _outcome(recognizer(entries).recognize(touch), entry.name)}
     if m_index in order[:10]:
@@ -81,9 +57,9 @@ def _scale_task(task):
 
 def _exhaustive_task(task):
     m_index, seed = task
-    db = _database()
+    db = ycb_database()
     entry = db.entries[m_index]
-    vertex, touch = _touch(entry, m_index, 0, seed)
+    vertex, touch = vertex_touch(entry, m_index, 0, seed)
     return {"model": entry.name, "vertex": vertex,
             "fast": _outcome(recognizer(db.entries).recognize(touch), entry.name),
             "exhaustive": _outcome(recognizer(db.entries, exhaustive=True, refine=64).recognize(touch),

@@ -14,7 +14,7 @@ scans), two measurements that need the truth, and so no search:
     (about ``axes`` random axes, seeded), the share of refinements (the
     search's own: ``iterations`` exact steps on three times ``coarse_points``
     points a curve, then two on all points) that end within the fit limit
-    (:func:`tactrec.methods.fast.fit_limit`).  0 degrees is the ceiling: on
+    (:func:`tactrec.probability.fit_limit`).  0 degrees is the ceiling: on
     noisy data the true pose itself may lie beyond the limit.  15 degrees is half the step
     of the all-rotations tiers; the estimated normal is off by a few
     degrees on coarse scans.
@@ -34,13 +34,13 @@ from scipy.spatial.transform import Rotation
 from ..features import Touch
 from ..io.atomic import write_text_atomic
 from ..methods import get_method
-from ..methods.fast import TIERS, fit_limit, tier_cost, tier_places
+from ..methods.fast import TIERS, tier_cost, tier_places
 from ..methods.fast_stages import tier_span
+from ..probability import fit_limit
 from ..registration import mesh_fast
 from ..registration.solver import Criteria, solve
 from ..surfaces import BUILTIN_SETS
-from .common import instance_rng, run_parallel, write_json
-from .fast_vs_paper import PROTOCOLS, _database, _simulate
+from .common import PROTOCOLS, database, instance_rng, run_parallel, simulate, write_json
 
 __all__ = ["run", "ANGLES"]
 
@@ -60,9 +60,9 @@ def _tier_of(rank: int) -> str:
 def _touch(task) -> dict:
     models, m_index, instance, seed, protocol, axes = task
     config = get_method("fast").configure()
-    entry = _database(models).entries[m_index]
+    entry = database(models).entries[m_index]
     model = entry.model
-    _, data = _simulate(entry, m_index, instance, seed, protocol)
+    _, data = simulate(entry, m_index, instance, seed, protocol)
     truth = data.meta["truth"]
     touch = Touch.from_data(data)
     ranks = []
@@ -99,7 +99,7 @@ def run(*, out, instances: int = 10, seed: int = 0, jobs: int | None = None, qui
     tasks = [(models, m, i, seed, p, axes) for p in protocols for m in range(len(models)) for i in range(instances)]
     records = run_parallel(_touch, tasks, jobs=jobs or 1, quiet=quiet, desc="search-limits")
     config = get_method("fast").configure()
-    db = _database(models)
+    db = database(models)
     radius = PROTOCOLS["p3"]["length"] / 2.0                  # a P3 touch's, in the scans' millimetres
     cost = {e.name: [tier_cost(config, k, 1, tier_places(config, k, e.model, radius)) for k in range(len(TIERS))]
             for e in db.entries}

@@ -50,7 +50,8 @@ TARGETS = {"tip": (0.99, 1.2), "all together": (0.97, 1.5), "alone_points": 3.0}
 
 
 def _code_hash() -> str:
-    return sources_hash(*CORE_SOURCES, "sensor.py", "simulation.py", "bench/fast_vs_paper.py", "bench/sensor.py")
+    return sources_hash(*CORE_SOURCES, "sensor.py", "simulation.py", "bench/fast_vs_paper.py", "bench/common.py",
+                        "bench/sensor.py")
 
 
 def _models(scans: str) -> tuple[str, ...]:
@@ -60,14 +61,14 @@ def _models(scans: str) -> tuple[str, ...]:
 
 
 def _touch(task) -> dict:
-    from .fast_vs_paper import _database, _simulate
+    from .common import database, simulate
 
     scans, m_index, instance, seed, protocol, setting = task
-    db = _database(_models(scans))
+    db = database(_models(scans))
     entry = db.entries[m_index]
     row = {"scans": scans, "protocol": protocol, "setting": setting, "model": entry.name, "instance": instance}
     try:
-        _, touch = _simulate(entry, m_index, instance, seed, protocol, Imperfections(**SETTINGS[setting]))
+        _, touch = simulate(entry, m_index, instance, seed, protocol, Imperfections(**SETTINGS[setting]))
     except ValueError as exc:                  # no such sensor records this stroke (a tip too large for a hollow)
         return dict(row, recognized=None, refused=None, untraceable=str(exc), seconds=None)
     tip = float(SETTINGS[setting].get("tip_radius", 0.0))
@@ -90,7 +91,7 @@ def _quantiles(values) -> list | None:
     return None if not len(v) else [float(np.median(v)), float(np.percentile(v, 95)), float(v.max())]
 
 
-def _summary(rows: list[dict]) -> dict:
+def setting_summary(rows: list[dict]) -> dict:
     """Accuracy over the touches the sensor could record (a tip that cannot follow a stroke: ``untraceable``)."""
     untraceable = sum(bool(r.get("untraceable")) for r in rows)
     rows = [r for r in rows if not r.get("untraceable")]
@@ -116,7 +117,7 @@ def run(*, out, instances: int = 3, seed: int = 0, jobs: int | None = None, quie
         for p in PROTOCOLS:
             for s in settings:
                 chosen = [r for r in rows if (r["scans"], r["protocol"], r["setting"]) == (scans, p, s)]
-                summary[f"{scans}/{p}/{s}"] = _summary(chosen)
+                summary[f"{scans}/{p}/{s}"] = setting_summary(chosen)
     table = {"benchmark": "sensor", "method": "fast", "instances": instances, "seed": seed,
              "settings": {s: SETTINGS[s] for s in settings},
              "targets": TARGETS, "summary": summary, "rows": rows}

@@ -1,7 +1,7 @@
 """``tactrec bench serve``: what a request to ``tactrec serve`` costs beyond its recognition.
 
 A real service process (``tactrec serve --models`` the ten ``paper-fig11`` scans, method ``fast``)
-gets one P3 touch per request (:func:`tactrec.bench.scale._touch`: 81 points per curve, 60
+gets one P3 touch per request (:func:`tactrec.bench.common.vertex_touch`: 81 points per curve, 60
 degrees, at vertices spread over each scan; ``instances`` per model), each sent once the last
 answer has come.  Per request the table gives the round trip as the client sees it (writing the
 line to reading the answer) and the recognition's own ``seconds`` (the answer's), and the
@@ -18,7 +18,7 @@ import time
 from pathlib import Path
 
 from .common import scan_database, spread, write_json
-from .scale import _touch
+from .common import vertex_touch
 
 __all__ = ["run", "TARGET_MS"]
 
@@ -31,7 +31,7 @@ def run(*, out: Path, instances: int, seed: int, jobs=None, quiet: bool = True, 
 
     names = BUILTIN_SETS["paper-fig11"]
     entries = scan_database(tuple(names)).entries
-    touches = [(e.name, _touch(e, m, i, seed)[1]) for m, e in enumerate(entries) for i in range(instances)]
+    touches = [(e.name, vertex_touch(e, m, i, seed)[1]) for m, e in enumerate(entries) for i in range(instances)]
     proc = subprocess.Popen([sys.executable, "-m", "tactrec", "serve", "--models", *names, "--method", "fast",
                              "--quiet"], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
     rows = []

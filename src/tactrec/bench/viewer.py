@@ -1,6 +1,6 @@
 """``tactrec bench viewer``: how big ``tactrec show``'s page is and how fast a browser opens and draws it.
 
-For each of the ten ``paper-fig11`` scans, ``instances`` P3 touches (:func:`tactrec.bench.scale._touch`)
+For each of the ten ``paper-fig11`` scans, ``instances`` P3 touches (:func:`tactrec.bench.common.vertex_touch`)
 are recognised among the ten (``fast``) and each result's page is written (:mod:`tactrec.viewer`: the
 five best registered models get a view).  The table gives each page's size and the time to write
 it, and the time headless Chromium (the system's, as for ``tactrec show --png``; WebGL on
@@ -18,7 +18,7 @@ import time
 from pathlib import Path
 
 from .common import scan_database, spread, write_json
-from .scale import _touch
+from .common import vertex_touch
 
 __all__ = ["run", "TARGET_MB", "TARGET_SECONDS", "OPENS"]
 
@@ -59,7 +59,7 @@ def run(*, out: Path, instances: int, seed: int, jobs=None, quiet: bool = True, 
         try:
             for m, entry in enumerate(db.entries):
                 for i in range(instances):
-                    touch = _touch(entry, m, i, seed)[1]
+                    touch = vertex_touch(entry, m, i, seed)[1]
                     result = recognizer.recognize(touch).to_json()
                     start = time.perf_counter()
                     text = page(touch_scene(result, touch.curves, models, title=entry.name))

@@ -20,7 +20,6 @@ a face with barycentric coordinates ``(1 - b1 - b2, b1, b2)``.
 
 from __future__ import annotations
 
-import hashlib
 import os
 from functools import cached_property
 from pathlib import Path
@@ -28,9 +27,7 @@ from pathlib import Path
 import numpy as np
 from scipy import sparse
 
-from ..errors import InputError
 from .base import SiteFrame, SurfaceModel, TableSamples
-from .mesh_cleanup import clean_mesh
 from .mesh_field import DistanceField, build_field
 from .mesh_curvature import CurvatureField, curvature_field, paraboloid_curvatures, tangents, unit_rows
 from .mesh_sections import resample_polyline, segment_distance
@@ -71,45 +68,13 @@ class MeshModel(SurfaceModel):
     @classmethod
     def from_file(cls, path: str | os.PathLike, *, units: str | None = None, scale: float | None = None,
                   name: str | None = None) -> "MeshModel":
-        """Load and clean a mesh file.  ``units`` are the file's; ``scale``
-        multiplies its coordinates (e.g. 1000 with ``units="m"`` gives mm)."""
-        import trimesh
+        """Load and clean a mesh file (:func:`.mesh_cleanup.read_mesh`).  ``units`` are the file's;
+        ``scale`` multiplies its coordinates (e.g. 1000 with ``units="m"`` gives mm)."""
+        from .mesh_cleanup import read_mesh
 
-        from ..units import UNITS, unit_scale
-
-        path = Path(path)
-        if not path.is_file():
-            raise InputError("no such file", path)
-        if units is not None:
-            try:
-                unit_scale(units)
-            except ValueError as exc:
-                raise InputError(str(exc), path) from None
-        if scale is not None and not (np.isfinite(scale) and scale > 0):
-            raise InputError(f"scale must be a positive number, got {scale!r}", path)
-        blob = path.read_bytes()
-        if not blob.strip():
-            raise InputError("empty file", path)
-        try:
-            mesh = trimesh.load(path, force="mesh", process=False)
-        except Exception as exc:  # trimesh raises many kinds on a broken file
-            raise InputError(f"cannot read mesh ({exc.__class__.__name__}: {str(exc)[:120]})", path) from None
-        if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0 or len(mesh.vertices) < 3:
-            raise InputError("no triangles in the file", path)
-        vertices = np.asarray(mesh.vertices, dtype=np.float64)
-        if not np.all(np.isfinite(vertices)):
-            raise InputError("vertex coordinates are not finite", path)
-        vertices, faces, report = clean_mesh(vertices, np.asarray(mesh.faces, dtype=np.int64))
-        if len(faces) == 0:
-            raise InputError("degenerate mesh: no triangle with a non-zero area", path)
-        factor = 1.0 if scale is None else float(scale)
-        out_units = units
-        if scale is not None and units is not None:
-            # name the units the scaled coordinates are in, when it is a known one
-            target = unit_scale(units) / factor
-            out_units = next((u for u, s in UNITS.items() if np.isclose(s, target, rtol=1e-9)), None)
-        return cls(vertices * factor, faces, name=name or path.stem, units=out_units, source=str(path),
-                   source_hash=hashlib.sha256(blob).hexdigest(), scale=factor, cleanup=report)
+        vertices, faces, report, out_units, factor, digest = read_mesh(path, units=units, scale=scale)
+        return cls(vertices, faces, name=name or Path(path).stem, units=out_units, source=str(path),
+                   source_hash=digest, scale=factor, cleanup=report)
 
     # ------------------------------------------------------------------ storage
     def to_store(self) -> dict[str, np.ndarray]:

@@ -41,7 +41,7 @@ def paper_like(model: MeshModel, *, extent: tuple[float, float] = EXTENT, vertic
     low, high = extent
     v, f = model.vertices, model.faces
     while len(v) < vertices:
-        v, f = trimesh.remesh.subdivide_loop(v, _manifold(f), iterations=1)
+        v, f = trimesh.remesh.subdivide_loop(v, manifold_faces(f), iterations=1)
     bounds = np.array([v.min(axis=0), v.max(axis=0)])
     size = float(np.max(bounds[1] - bounds[0]))
     factor = min(max(size, low), high) / size
@@ -51,7 +51,7 @@ def paper_like(model: MeshModel, *, extent: tuple[float, float] = EXTENT, vertic
                      scale=model.scale * factor, cleanup=model.cleanup)
 
 
-def _manifold(faces: np.ndarray) -> np.ndarray:
+def manifold_faces(faces: np.ndarray) -> np.ndarray:
     """``faces (f, 3)`` without the faces beyond the first two (by index) on any edge shared by more."""
     while True:
         edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
