@@ -1,3 +1,5 @@
+"""The fixtures the test files share: model sets built once per test process."""
+
 import warnings
 
 import numpy as np
@@ -16,6 +18,34 @@ def table1():
 def scans():
     """Four YCB scans (banana, mug, pear, hammer) with their lookup tables."""
     return build_entries(["banana", "mug", "pear", "hammer"])
+
+
+def small_meshes():
+    """Four small meshes (mm) of distinct shapes, for searches every vertex of which is affordable:
+    an egg (an ellipsoid), a capsule, a brick and a ring (a torus), with their lookup tables."""
+    import trimesh
+
+    from tactrec.recognition import ModelEntry
+    from tactrec.surfaces.mesh import MeshModel
+    from tactrec.tables import CurvatureTable
+
+    shapes = {
+        "egg": trimesh.creation.icosphere(subdivisions=4, radius=1.0).apply_scale([30.0, 24.0, 18.0]),
+        "capsule": trimesh.creation.capsule(height=40.0, radius=12.0, count=[40, 40]),
+        "brick": trimesh.creation.box(extents=(40.0, 30.0, 20.0)).subdivide().subdivide().subdivide().subdivide(),
+        "ring": trimesh.creation.torus(major_radius=22.0, minor_radius=8.0, major_sections=72, minor_sections=32),
+    }
+    out = []
+    for name, mesh in shapes.items():
+        model = MeshModel(mesh.vertices, mesh.faces, name=name, units="mm")
+        out.append(ModelEntry(model, CurvatureTable(model.table_samples())))
+    return out
+
+
+@pytest.fixture(scope="session")
+def small():
+    """:func:`small_meshes`, built once."""
+    return small_meshes()
 
 
 @pytest.fixture(autouse=True)

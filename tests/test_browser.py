@@ -145,7 +145,6 @@ def test_a_still_shows_the_model_and_its_curves_at_print_size(browser, page_of_a
 def test_a_sessions_page_draws_and_lists_its_touches(browser, tmp_path):
     """A session of two touches of the elliptic cylinder: drawn offline without errors, its models and
     touches listed."""
-    from tactrec.bench.common import instance_rng
     from tactrec.io.session import SessionTouch
     from tactrec.simulation import random_rigid_motion, sensor_to_world, simulate_random_touch
     from tactrec.surfaces import load_model
@@ -156,12 +155,13 @@ def test_a_sessions_page_draws_and_lists_its_touches(browser, tmp_path):
     from tactrec.database import open_models
 
     db = open_models(models=names)
-    pose = random_rigid_motion(instance_rng(3), extent=100.0)
+    pose = random_rigid_motion(np.random.default_rng((3,)), extent=100.0)
     items = []
     with Recognizer(db) as recognizer:
         session = recognizer.session()
         for i in range(2):
-            touch = simulate_random_touch(models["elliptic-cylinder"], rng=instance_rng(4, i), points=21, spacing=0.5,
+            touch = simulate_random_touch(models["elliptic-cylinder"], rng=np.random.default_rng((4, i)),
+                                          points=21, spacing=0.5,
                                           angle=60.0, noise=0.01, noise_kind="gaussian", outward=False)
             items.append(SessionTouch(touch, *sensor_to_world(touch, pose)))
             session.add(touch, (items[-1].rotation, items[-1].translation))

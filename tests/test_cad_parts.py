@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from tactrec.bench.cad_parts import CAD, MAX_EDGE, part_mesh
-from tactrec.bench.fast_vs_paper import _database, _simulate
+from tactrec.bench.common import database, simulate
 from tactrec.probability import fit_limit
 from tactrec.recognition import FLOOR, Recognizer
 
@@ -27,12 +27,12 @@ def test_noise_free_touches_of_sharp_parts_end_on_a_fit():
     """The paper's P3 (24 mm curves at vertices, no noise, sensor frame) on the ten parts, two seeded
     touches each, recognised among all ten: at least 19 of 20 end on a pose within the fit limit
     (a flat or right-angled patch fits several parts exactly, so which part is not asserted)."""
-    db = _database(CAD)
+    db = database(CAD)
     fits = 0
     with Recognizer(db.entries) as recognizer:
         for m, entry in enumerate(db.entries):
             for i in range(2):
-                _, data = _simulate(entry, m, i, 3, "p3")
+                _, data = simulate(entry, m, i, 3, "p3")
                 r = recognizer.recognize(data)
                 reg = r.registration
                 fits += reg is not None and reg.error / reg.scale <= fit_limit(r.touch, FLOOR)

@@ -1,6 +1,9 @@
 """The README and docs/ point at what exists: every relative link at a file there (and a heading of
 it, where the link names one), every `tactrec COMMAND` at a command of the CLI, every `tactrec
-bench NAME` at a benchmark, and every repository path they quote at a file."""
+bench NAME` at a benchmark, every repository path they quote at a file, and every module, class or
+function of the package they name (`tactrec.x.y`) at one that is there."""
+
+import importlib
 
 import argparse
 import re
@@ -58,8 +61,85 @@ def test_every_command_and_benchmark_named_exists(page):
         assert name in benches, f"{page.name}: `tactrec bench {name}` is no benchmark"
 
 
+def _quoted_commands(text: str) -> list[str]:
+    """Every ``tactrec ...`` command a page quotes, in backticks or on a line of a code block."""
+    found = re.findall(r"`(tactrec [^`\n]+)`", text)
+    for block in re.findall(r"```(?:sh|bash|console)?\n(.*?)```", text, flags=re.S):
+        found += [line.strip() for line in block.splitlines() if line.strip().startswith("tactrec ")]
+    return found
+
+
+@pytest.mark.parametrize("page", PAGES, ids=lambda p: p.name)
+def test_every_option_of_a_quoted_command_is_one_of_its_options(page):
+    """``tactrec recognize DATA --db DB --json``: each ``--option`` a page gives a command is one the
+    command takes (the words in between are the page's placeholders)."""
+    commands = _subcommands(build_parser())
+    wrong = []
+    for quoted in _quoted_commands(page.read_text(encoding="utf-8")):
+        words = quoted.split("  #")[0].split()
+        parser = commands.get(words[1]) if len(words) > 1 else None
+        if parser is None:
+            continue
+        known = {option for action in parser._actions for option in action.option_strings}
+        for word in words[2:]:
+            option = re.match(r"[\[(]*(--[a-z][a-z-]*)", word)
+            if option and option.group(1) not in known:
+                wrong.append(f"{quoted!r}: {option.group(1)}")
+    assert not wrong, f"{page.name}: options no command takes: " + "; ".join(wrong)
+
+
 @pytest.mark.parametrize("page", PAGES, ids=lambda p: p.name)
 def test_every_repository_path_quoted_exists(page):
     text = page.read_text(encoding="utf-8")
     for path in re.findall(r"`((?:examples|docs|src|tests)/[\w./-]+\.\w+)`", text):
         assert (ROOT / path).exists(), f"{page.name}: `{path}`: no such file"
+    for path in re.findall(r"`(tactrec/[\w./-]+\.py)`", text):
+        assert (ROOT / "src" / path).exists(), f"{page.name}: `{path}`: no such file"
+
+
+def _named(dotted: str) -> bool:
+    """Whether ``dotted`` (``tactrec.x.y``) is a module of the package or a name in one (an
+    attribute a class declares or sets on its instances included)."""
+    import inspect
+
+    parts = dotted.split(".")
+    for k in range(len(parts), 0, -1):
+        try:
+            found = importlib.import_module(".".join(parts[:k]))
+        except ImportError:
+            continue
+        for attribute in parts[k:]:
+            if hasattr(found, attribute):
+                found = getattr(found, attribute)
+                continue
+            source = inspect.getsource(found) if inspect.isclass(found) else ""
+            return bool(re.search(rf"(self\.{attribute}\b|^\s+{attribute}\s*:)", source, flags=re.M))
+        return True
+    return False
+
+
+def test_every_reference_in_a_docstring_names_a_part_of_the_package():
+    """The sources' own references (``:func:`tactrec.x.y```, ``:mod:`.sibling```) name what is there:
+    a module moved or a function renamed leaves no reference behind."""
+    src = ROOT / "src"
+    wrong = []
+    for path in sorted((src / "tactrec").rglob("*.py")):
+        module = ".".join(path.relative_to(src).with_suffix("").parts).removesuffix(".__init__")
+        package = module if path.name == "__init__.py" else module.rpartition(".")[0]
+        text = path.read_text(encoding="utf-8")
+        for found in re.finditer(r":(?:func|mod|class|meth|data|attr|exc):`~?(\.*)(tactrec\.[\w.]+|[\w.]+)`", text):
+            dots, name = found.groups()
+            if not dots and not name.startswith("tactrec."):
+                continue                                          # a name of the module itself, or numpy's
+            if dots:
+                name = ".".join(package.split(".")[:len(package.split(".")) - len(dots) + 1] + [name])
+            if not _named(name):
+                wrong.append(f"{path.relative_to(ROOT)}:{text[:found.start()].count(chr(10)) + 1}: {found.group(0)}")
+    assert not wrong, "references to nothing:\n" + "\n".join(wrong)
+
+
+@pytest.mark.parametrize("page", PAGES, ids=lambda p: p.name)
+def test_every_part_of_the_package_named_exists(page):
+    text = page.read_text(encoding="utf-8")
+    missing = sorted({name for name in re.findall(r"`(tactrec(?:\.\w+)+)", text) if not _named(name)})
+    assert not missing, f"{page.name}: no such part of the package: {', '.join(missing)}"

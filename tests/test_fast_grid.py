@@ -1,4 +1,4 @@
-"""The grid at the exact steps' basin (tactrec.methods.fast_stages._hopped): a pose the exact steps
+"""The grid at the exact steps' basin (tactrec.methods.fast_stages.hop_stage): a pose the exact steps
 leave a few times beyond the fit, near the truth on a finely faceted scan, is brought to the fit."""
 
 import types
@@ -11,7 +11,7 @@ from scipy.spatial.transform import Rotation
 from tactrec.features import Touch
 from tactrec.methods.common import in_model_units
 from tactrec.methods.fast import FastConfig
-from tactrec.methods.fast_stages import _hopped, _registration
+from tactrec.methods.fast_stages import hop_stage, mesh_registration
 from tactrec.probability import fit_limit
 from tactrec.recognition import FLOOR
 from tactrec.registration import mesh_fast
@@ -57,8 +57,9 @@ def test_the_grid_brings_a_pose_the_exact_steps_left_near_the_truth_to_the_fit(b
         if error[0] <= limit:
             continue
         stalled += 1
-        found = _hopped(held, [0], touch, config, items=[(_registration(bumpy, t, R[0], tr[0], error[0], 1), 1.0)])
-        r = found[0]["registration"]
+        start = mesh_registration(bumpy, t, R[0], tr[0], error[0], 1)
+        found = hop_stage(held, [0], touch, config, items=[(start, 1.0)])
+        r = found[0].registration
         mended += r.error / r.scale <= limit
     assert stalled >= 3
     assert mended >= 2 * stalled / 3

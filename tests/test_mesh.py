@@ -326,7 +326,7 @@ def test_face_neighbours_pair_faces_across_their_shared_edges():
 def test_paper_like_scans_are_refined_smoothly_and_scaled_into_the_papers_range():
     """Loop subdivision of a coarse sphere: more vertices, nearer the sphere than the facets were,
     scaled into 60-95 mm; an edge shared by three faces is repaired first."""
-    from tactrec.surfaces.paper_like import _manifold, paper_like
+    from tactrec.surfaces.paper_like import manifold_faces, paper_like
 
     coarse = trimesh.creation.icosphere(subdivisions=1, radius=20.0)          # 42 vertices, 40 mm across
     m = MeshModel(coarse.vertices, coarse.faces, name="ball", units="mm")
@@ -341,6 +341,6 @@ def test_paper_like_scans_are_refined_smoothly_and_scaled_into_the_papers_range(
     big = paper_like(MeshModel(coarse.vertices * 10, coarse.faces, name="big", units="mm"), vertices=100)
     assert np.isclose((big.bounds[1] - big.bounds[0]).max(), 95.0)             # 400 mm -> the high end
     faces = np.vstack([coarse.faces, [[coarse.faces[0, 0], coarse.faces[0, 1], 41]]])   # a third face on an edge
-    assert len(_manifold(faces)) == len(coarse.faces)
+    assert len(manifold_faces(faces)) == len(coarse.faces)
     with pytest.raises(ValueError, match="millimetre"):
         paper_like(MeshModel(coarse.vertices, coarse.faces, name="m", units="m"))

@@ -4,20 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from tactrec.bench.common import instance_rng
 from tactrec.estimation import noise_level
 from tactrec.probability import (CONSISTENT_SE, NOISE_VARIANCE, SEARCH_MISS, UNKNOWN_PRIOR, evidence, fit_spread,
                                  open_world)
 from tactrec.recognition import Recognizer
 from tactrec.simulation import simulate_random_touch
-
-
-@pytest.fixture(scope="module")
-def small():
-    from test_fast import _small_meshes
-
-    return _small_meshes()
 
 
 def test_the_noise_estimates_spread_is_the_stated_one():
@@ -103,7 +94,8 @@ def test_touches_of_a_left_out_model_come_back_unknown(small):
     with Recognizer(small) as recognizer:
         for m_index, entry in enumerate(small):
             for i in range(5):
-                touch = simulate_random_touch(entry.model, rng=instance_rng(61, m_index, i), points=41, spacing=0.3,
+                touch = simulate_random_touch(entry.model, rng=np.random.default_rng((61, m_index, i)),
+                                              points=41, spacing=0.3,
                                               angle=60.0, outward=True)
                 out = recognizer.recognize(touch, among=[n for n in names if n != entry.name])
                 unknown_top += out.unknown > max(out.probabilities.values(), default=0.0)
@@ -143,7 +135,7 @@ def test_a_missed_line_counts_against_the_poses_it_cuts(small, tmp_path):
     from tactrec.io.session import MissedLine, SessionMiss, SessionTouch, load_session, save_session
 
     entry = small[1]
-    touch = simulate_random_touch(entry.model, rng=instance_rng(71, 0), points=41, spacing=0.3, angle=60.0,
+    touch = simulate_random_touch(entry.model, rng=np.random.default_rng((71, 0)), points=41, spacing=0.3, angle=60.0,
                                   noise=0.02, noise_kind="gaussian", outward=False, sensor_frame=False)
     with Recognizer(small) as recognizer:
         session = recognizer.session()

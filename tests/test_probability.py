@@ -7,17 +7,9 @@ import pytest
 from scipy import special
 
 from tactrec.bench.calibration import expected_calibration_error, reliability
-from tactrec.bench.common import instance_rng
 from tactrec.probability import bootstrap_probabilities, evidence
 from tactrec.recognition import Recognizer
 from tactrec.simulation import simulate_random_touch
-
-
-@pytest.fixture(scope="module")
-def small():
-    from test_fast import _small_meshes
-
-    return _small_meshes()
 
 
 def _seeded_results(entries, *, seed: int, per_model: int, noise: float):
@@ -27,7 +19,8 @@ def _seeded_results(entries, *, seed: int, per_model: int, noise: float):
     with Recognizer(entries) as recognizer:
         for m_index, entry in enumerate(entries):
             for i in range(per_model):
-                touch = simulate_random_touch(entry.model, rng=instance_rng(seed, m_index, i), points=41, spacing=0.3,
+                touch = simulate_random_touch(entry.model, rng=np.random.default_rng((seed, m_index, i)),
+                                              points=41, spacing=0.3,
                                               angle=60.0, noise=noise, noise_kind="gaussian", outward=False)
                 out.append((entry.name, recognizer.recognize(touch)))
     return out

@@ -2,8 +2,6 @@
 
 import numpy as np
 import pytest
-
-from tactrec.bench.common import instance_rng
 from tactrec.database import build_entries
 from tactrec.recognition import recognize
 from tactrec.simulation import simulate_random_touch
@@ -16,7 +14,7 @@ def test_p2_in_small_every_touch_recognised(table1):
     """Two seeded instances per Table 1 surface, recognised among the four (P2)."""
     for s, entry in enumerate(table1.entries):
         for i in range(2):
-            touch = simulate_random_touch(entry.model, rng=instance_rng(11, s, i), **P)
+            touch = simulate_random_touch(entry.model, rng=np.random.default_rng((11, s, i)), **P)
             result = recognize(touch, table1)
             assert result.best == entry.name, (entry.name, i, [(r.model, r.error) for r in result.ranking])
             err = entry.model.location_error(result.registration.location, touch.meta["truth"]["contact"])

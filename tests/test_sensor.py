@@ -240,12 +240,12 @@ def test_a_stream_in_csv_becomes_the_curves(tmp_path, sphere, capsys):
 def test_bench_sensor_counts_untraceable_strokes_apart():
     """A stroke no tip can follow is counted apart, not as a miss or a refusal: of four rows (right,
     wrong, refused, untraceable) the summary has 3 touches, 1 right, 1 refused, 1 untraceable."""
-    from tactrec.bench.sensor import _summary
+    from tactrec.bench.sensor import setting_summary
 
     base = dict(model="a", seconds=1.0)
     rows = [dict(base, recognized="a", refused=None), dict(base, recognized="b", refused=None),
             dict(base, recognized=None, refused="bad", seconds=None),
             dict(base, recognized=None, refused=None, untraceable="a tip of radius 5 cannot follow", seconds=None)]
-    s = _summary(rows)
+    s = setting_summary(rows)
     assert (s["touches"], s["right"], s["refused"], s["untraceable"]) == (3, 1, 1, 1)
     assert s["accuracy_percent"] == pytest.approx(100.0 / 3)

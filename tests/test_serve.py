@@ -9,8 +9,6 @@ import sys
 
 import numpy as np
 import pytest
-
-from tactrec.bench.common import instance_rng
 from tactrec.database import open_models
 from tactrec.recognition import Recognizer
 from tactrec.service import Service
@@ -27,12 +25,12 @@ def db():
 
 def _touch(name, db, key):
     model = next(e.model for e in db if e.name == name)
-    return simulate_random_touch(model, rng=instance_rng(41, key), **TOUCH)
+    return simulate_random_touch(model, rng=np.random.default_rng((41, key)), **TOUCH)
 
 
 def _session_touches(db, count):
     """``count`` touches of the sphere, each in its own sensor frame, with ``sensor2world``."""
-    pose = random_rigid_motion(instance_rng(42), extent=200.0)
+    pose = random_rigid_motion(np.random.default_rng((42,)), extent=200.0)
     out = []
     for i in range(count):
         data = _touch("sphere-33", db, i)
@@ -184,7 +182,9 @@ def test_an_add_that_fails_midway_leaves_the_session_as_it_was(db, monkeypatch):
         def broken(*args, **kwargs):
             raise RuntimeError("joint fit failed")
 
-        monkeypatch.setattr(session, "_joint_fit", broken)
+        from tactrec.session.joint import JointFit
+
+        monkeypatch.setattr(JointFit, "__call__", broken)
         got = service.answer(json.dumps({"id": 3, "session": "s", "add": touches[2]}))
         assert "internal error" in got["error"]
         monkeypatch.undo()

@@ -19,15 +19,9 @@ from tactrec.surfaces import load_model
 from tactrec.tables import CurvatureTable
 from tactrec.tip import Offset, corrected, foot_distance
 
-from test_fast import _small_meshes
 
 RADIUS = 33.0                                   # the built-in sphere-33, centred at the origin
 TOUCH = dict(points=41, spacing=0.3, angle=60.0)
-
-
-@pytest.fixture(scope="module")
-def small():
-    return _small_meshes()
 
 
 @pytest.fixture(scope="module")
@@ -62,20 +56,21 @@ def test_a_sphere_touched_with_a_tip_gives_its_own_curvature(r):
         assert np.max(np.abs(np.linalg.norm(surface, axis=1) - RADIUS)) < 0.02
 
 
-def test_the_correction_is_the_offset_formula():
-    """kappa / (1 + r kappa) per principal curvature, the contact moved by -r N; a bend at the tip's radius
-    (a sharp edge, 1 + r kappa = 0) or tighter is a sharp edge's (radius SHARP r)."""
-    from tactrec.tip import SHARP
-
+def test_the_correction_gives_the_surface_under_the_tip():
+    """The centres of a 2 mm tip trace radii 10 and -5 (curvatures 0.1 and -0.2): the surface under them
+    has radii 12 and -3 (each the centres' radius plus the tip's, signed), the contact 2 below the
+    centre; where the centres bend at the tip's radius or tighter (over a sharp edge) the surface
+    reads as bending more tightly than the tip, never as flat or the other way."""
     from tactrec.estimation import LocalGeometry
 
     g = LocalGeometry(np.zeros(3), np.array([0.0, 0.0, 1.0]), 0.1, -0.2, np.eye(3)[:2], np.eye(3)[:2],
                       np.array([0.1, -0.2]), True)
     c = corrected(g, 2.0)
-    assert np.isclose(c.k1, 0.1 / 1.2) and np.isclose(c.k2, -0.2 / 0.6)
+    assert np.isclose(1.0 / c.k1, 12.0) and np.isclose(1.0 / c.k2, -3.0)
     assert np.allclose(c.contact, [0.0, 0.0, -2.0]) and np.allclose(c.normal_curvatures, [c.k1, c.k2])
-    for r in (5.0, 5.5, 7.0):                      # an edge: the surface's radius there SHARP r
-        assert np.isclose(corrected(g, r).k2, -1.0 / (SHARP * r))
+    for r in (5.0, 5.5, 7.0):                      # an edge: the surface bends tighter than the tip there
+        k2 = corrected(g, r).k2
+        assert k2 < 0 and -1.0 / k2 < r
 
 
 def test_a_bend_is_judged_over_the_curves_length():

@@ -125,22 +125,21 @@ def test_a_sessions_views_draw_each_touch_where_the_joint_pose_puts_it():
     egg's view draws every touch, each fitted touch's curves on the egg at its per-touch error, the
     slipped one faded and crossed (and listed so), the axes' range about the egg, not the slipped
     curves."""
-    from test_fast import _small_meshes
-
-    from tactrec.bench.common import instance_rng
+    from conftest import small_meshes
     from tactrec.io.session import SessionTouch
     from tactrec.simulation import random_rigid_motion, sensor_to_world, simulate_random_touch
     from tactrec.viewer import session_scene
 
-    small = _small_meshes()
+    small = small_meshes()
     models = {e.name: e.model for e in small}
     noisy = dict(points=41, spacing=0.3, angle=60.0, noise=0.03, noise_kind="gaussian", outward=False)
-    poses = [random_rigid_motion(instance_rng(9), extent=300.0)] * 3 + [random_rigid_motion(instance_rng(10), extent=300.0)]
+    poses = [random_rigid_motion(np.random.default_rng((9,)), extent=300.0)] * 3 \
+        + [random_rigid_motion(np.random.default_rng((10,)), extent=300.0)]
     items = []
     with Recognizer(small) as recognizer:
         session = recognizer.session()
         for i, pose in enumerate(poses):
-            touch = simulate_random_touch(models["egg"], rng=instance_rng(11, i), **noisy)
+            touch = simulate_random_touch(models["egg"], rng=np.random.default_rng((11, i)), **noisy)
             R, t = sensor_to_world(touch, pose)
             items.append(SessionTouch(touch, R, t))
             session.add(touch, (R, t))
@@ -172,22 +171,20 @@ def test_a_proposed_touch_is_drawn_on_each_hypothesis_that_it_separates():
     hypotheses stay open): where a touch is proposed, each view draws its approach line, its three
     curves and its contact; on the most probable hypothesis the contact lies on the surface and
     the curves start and end on it."""
-    from test_fast import _small_meshes
-
-    from tactrec.bench.common import instance_rng
+    from conftest import small_meshes
     from tactrec.io.session import SessionTouch
     from tactrec.simulation import random_rigid_motion, sensor_to_world, simulate_random_touch
     from tactrec.viewer import session_scene
 
-    small = _small_meshes()
+    small = small_meshes()
     models = {e.name: e.model for e in small}
     noisy = dict(points=21, spacing=0.3, angle=60.0, noise=0.03, noise_kind="gaussian", outward=False)
     proposed = 0
     with Recognizer(small) as recognizer:
         for k in range(6):
             name = ("capsule", "ring")[k % 2]
-            touch = simulate_random_touch(models[name], rng=instance_rng(13, k), **noisy)
-            R, t = sensor_to_world(touch, random_rigid_motion(instance_rng(12, k), extent=300.0))
+            touch = simulate_random_touch(models[name], rng=np.random.default_rng((13, k)), **noisy)
+            R, t = sensor_to_world(touch, random_rigid_motion(np.random.default_rng((12, k)), extent=300.0))
             session = recognizer.session()
             session.add(touch, (R, t))
             result, proposal = session.result.to_json(), session.next(radius=20.0, rng=k).to_json()
@@ -220,16 +217,16 @@ def test_show_draws_a_session_and_its_saved_result_and_proposal_alike(tmp_path, 
     """``tactrec show SESSION``: a session's page (two touches of the elliptic cylinder in their sensors'
     frames); drawn again from ``recognize --json``'s result and ``next --json``'s proposal, the same
     scene; a proposal for a single touch, a malformed proposal and no output are one line each."""
-    from tactrec.bench.common import instance_rng
     from tactrec.io.session import SessionTouch, save_session
     from tactrec.simulation import random_rigid_motion, sensor_to_world, simulate_random_touch
     from tactrec.surfaces import load_model
 
     model = load_model("elliptic-cylinder")
-    pose = random_rigid_motion(instance_rng(3), extent=100.0)
+    pose = random_rigid_motion(np.random.default_rng((3,)), extent=100.0)
     items = []
     for i in range(2):
-        touch = simulate_random_touch(model, rng=instance_rng(4, i), points=21, spacing=0.5, angle=60.0, noise=0.01,
+        touch = simulate_random_touch(model, rng=np.random.default_rng((4, i)),
+                                      points=21, spacing=0.5, angle=60.0, noise=0.01,
                                       noise_kind="gaussian", outward=False)
         items.append(SessionTouch(touch, *sensor_to_world(touch, pose)))
     session = tmp_path / "session.json"
