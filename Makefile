@@ -3,7 +3,7 @@ PYTHON ?= python3.11
 VENV   := .venv
 BIN    := $(VENV)/bin
 
-.PHONY: demo test install install-test install-baselines clean
+.PHONY: demo test check install install-test install-baselines clean
 
 $(BIN)/python:
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "make: $(PYTHON) not found (set PYTHON=...)" >&2; exit 2; }
@@ -34,6 +34,14 @@ demo: install
 
 test: install-test
 	$(BIN)/python -m pytest -n 2 -q
+
+# the edit loop: the layout, the docs, the surfaces, the estimate, the steps, the field, the paper's
+# registration, recognition rates, the curves' meeting and the service (about 2 minutes on 2 cores);
+# `make test` is the whole suite, as CI runs it
+CHECK := test_imports test_docs test_surfaces test_normal_scales test_solver test_mesh test_report test_field \
+         test_serve test_registration test_traces test_recognition test_estimation
+check: install-test
+	$(BIN)/python -m pytest -n 2 -q $(CHECK:%=tests/%.py)
 
 clean:
 	rm -rf $(VENV) build *.egg-info src/*.egg-info .pytest_cache tactrec-demo.png tactrec-demo.html bench-out
