@@ -541,8 +541,8 @@ def test_multi_touch_tells_a_found_true_pose_from_a_missed_one(small, noise):
                                                                   for r in session.result.ranking])
     assert not truth_found(truth_of(session, entry, world2model))
     session.result = dataclasses.replace(session.result, ranking=[r for r in session.result.ranking if r is not missed])
-    truth = truth_of(session, entry, world2model)
-    assert truth["found"] is None and not truth_found(truth)
+    gone = truth_of(session, entry, world2model)
+    assert gone["found"] is None and not truth_found(gone)
     step = {"best": "a", "correct": True, "confidence": 1.0, "seconds": 1.0, "own_seconds": 1.0, "slipped": []}
     found, lost = dict(truth), dict(truth, found=worse)
     rows = [{s: [dict(step, truth=found), dict(step, truth=t)] for s in STRATEGIES} for t in (found, lost)]

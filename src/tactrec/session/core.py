@@ -31,10 +31,10 @@ refinement (more searches only in step 5):
    noise (its mean distance beyond the fit test's allowance over the
    points-weighted mean of their ``fit_limit``: another pose may fit them
    better), the new touch is searched again with every touch kept in its
-   score (:meth:`tactrec.recognition.Recognizer.recognize` with
-   ``context``), and steps 2-4 run again on its poses; if still no pose fits
-   them all at their noise, the touch kept before it is searched the same
-   way with the others in its score (:data:`STARTS`).  Once the best pose
+   score (:meth:`tactrec.recognition.Recognizer.recognize_jointly`, the other
+   touches as a :class:`~tactrec.features.Context`), and steps 2-4 run
+   again on its poses; if still no pose fits them all at their noise, the
+   touch kept before it is searched the same way with the others in its score (:data:`STARTS`).  Once the best pose
    does fit them all at their noise, a second pass from the same starts
    searches its rivals: the models every touch fits on its own whose joint
    pose does not fit them all at their noise (a search of the first pass
