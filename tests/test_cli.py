@@ -62,6 +62,42 @@ def test_build_reuses_unchanged_and_rebuilds_changed(tmp_path, capsys):
     assert np.isclose(loaded.get("hyperboloid").model.parameters["b"], 0.75)
 
 
+def test_a_stopped_build_is_not_a_database_and_the_next_build_finishes_it(tmp_path, capsys, monkeypatch):
+    """A build stopped after two of four models leaves an index that refuses to load (one line, exit 2)
+    and keeps those two for the next build, which builds only the other two and writes what a build in
+    one go writes."""
+    import tactrec.database as database
+
+    names = ["monkey-saddle", "crossed-trough", "ellipsoid", "elliptic-paraboloid"]
+    whole = tmp_path / "whole"
+    assert main(["build", *names, "--out", str(whole), "--quiet"]) == 0
+    stored, calls = database._stored_blob, []
+
+    def stopped(model, tips=()):
+        calls.append(model.name)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return stored(model, tips)
+
+    monkeypatch.setattr(database, "_stored_blob", stopped)
+    monkeypatch.setattr(database.os, "cpu_count", lambda: 1)
+    monkeypatch.setattr(database, "INDEX_EVERY", 0.0)
+    db = tmp_path / "db"
+    assert main(["build", *names, "--out", str(db), "--quiet"]) == 130
+    capsys.readouterr()
+    touch = tmp_path / "t.json"
+    assert main(["simulate", "ellipsoid", "--out", str(touch), "--seed", "1", "--quiet"]) == 0
+    assert main(["recognize", str(touch), "--db", str(db)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "stopped before it ended" in err[0] and str(db) in err[0]
+    monkeypatch.setattr(database, "_stored_blob", stored)
+    assert main(["build", *names, "--out", str(db)]) == 0
+    assert "2 built, 2 unchanged" in capsys.readouterr().out
+    assert json.loads((db / "index.json").read_text()) == json.loads((whole / "index.json").read_text())
+    assert sorted(p.name for p in db.glob("*.npz")) == sorted(p.name for p in whole.glob("*.npz"))
+    assert all((db / p.name).read_bytes() == p.read_bytes() for p in whole.glob("*.npz"))
+
+
 def test_changed_source_is_reported_when_the_database_is_used(tmp_path, capsys):
     src = tmp_path / "hyperboloid.toml"
     shutil.copy(EXAMPLES / "hyperboloid.toml", src)

@@ -317,6 +317,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_calibrate_parser(sub, count=_count, methods=METHODS, default_method=DEFAULT_METHOD)
 
+    from .cli_catalogue import add_catalogue_parser
+
+    add_catalogue_parser(sub, count=_count)
     from .cli_simulate import add_simulate_parser
 
     add_simulate_parser(sub, count=_count, positive=_positive, nonnegative=_nonnegative,

@@ -21,6 +21,7 @@ import json
 import os
 import re
 import sys
+import time
 from pathlib import Path
 from typing import Iterable, Sequence
 
@@ -42,6 +43,8 @@ TABLE_VERSION = 2
 #: bump when what a model stores besides its table changes, so that a build redoes it (a database
 #: of an older one still loads: what it lacks is made on first use); 2: a mesh's outer field
 STORE_VERSION = 2
+#: seconds between two writes of the index while a build is under way
+INDEX_EVERY = 10.0
 
 
 @dataclasses.dataclass
@@ -122,7 +125,7 @@ def _safe(name: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", name)[:80] or "model"
 
 
-def _read_index(db: Path) -> dict:
+def _read_index(db: Path, *, partial: bool = False) -> dict:
     index_path = db / "index.json"
     if not db.exists():
         raise InputError("no such database", db)
@@ -136,6 +139,9 @@ def _read_index(db: Path) -> dict:
         raise InputError(f"corrupted database index ({exc.__class__.__name__})", index_path) from None
     if not isinstance(index, dict) or index.get("format") != FORMAT or not isinstance(index.get("models"), list):
         raise InputError("corrupted database index (not a tactrec database)", index_path)
+    if index.get("complete", True) is not True and not partial:
+        raise InputError("a build of this database was stopped before it ended; run the same 'tactrec build' "
+                         "again to finish it (what was built is kept)", index_path)
     if index.get("version") != VERSION:
         raise InputError(f"database format version {index.get('version')!r}, this tactrec reads version {VERSION}: "
                          "rebuild it with 'tactrec build'", index_path)
@@ -225,30 +231,37 @@ def _stored_of(held: tuple, k: int) -> tuple[bytes, int]:
     return _stored_blob(models[k], tips)
 
 
-def _stored(models: list, todo: list[int], *, quiet: bool, tips=()) -> list[tuple[bytes, int]]:
-    """:func:`_stored_blob` of ``models[k]`` for each ``k`` of ``todo``, in order: in two forked
-    worker processes when there are two or more (a scan's distance field and tables take a second or
-    two each), else here."""
+def _stored(models: list, todo: list[int], *, quiet: bool, tips=()):
+    """``(k, blob, rows)`` of :func:`_stored_blob` for each model ``k`` of ``todo``, in order, as each is
+    done: in two forked worker processes when there are two or more (a scan's distance field and
+    tables take a second or two each), else here."""
     from .runner import Workers, can_fork
 
     bar = _progress(range(len(todo)), total=len(todo), desc="building", quiet=quiet)
     jobs = min(2, os.cpu_count() or 1, len(todo))
-    out = []
-    if jobs < 2 or not can_fork():
-        for k in todo:
-            out.append(_stored_blob(models[k], tips))
-            bar.update()
-        bar.close()
-        return out
-    pool = Workers((models, tips), jobs)
     try:
-        for found in pool.map(_stored_of, todo):
-            out.append(found)
-            bar.update()
+        if jobs < 2 or not can_fork():
+            for k in todo:
+                yield (k, *_stored_blob(models[k], tips))
+                bar.update()
+            return
+        pool = Workers((models, tips), jobs)
+        try:
+            for k, found in zip(todo, pool.map(_stored_of, todo)):
+                yield (k, *found)
+                bar.update()
+        finally:
+            pool.close()
     finally:
-        pool.close()
-    bar.close()
-    return out
+        bar.close()
+
+
+def _write_index(out: Path, items: list[dict], *, complete: bool) -> None:
+    """The index of the entries ``items``; ``complete`` False while a build is under way, so that a
+    build that is stopped leaves what it finished for the next build to reuse, and no database that
+    passes for whole."""
+    index = {"format": FORMAT, "version": VERSION, "models": items, **({} if complete else {"complete": False})}
+    write_text_atomic(out / "index.json", json.dumps(index, indent=1) + "\n")
 
 
 def build_database(models: Iterable, out: str | os.PathLike, *, quiet: bool = False, units: str | None = None,
@@ -272,13 +285,13 @@ def build_database(models: Iterable, out: str | os.PathLike, *, quiet: bool = Fa
     old: dict[str, dict] = {}
     if (out / "index.json").exists():
         try:
-            index = _read_index(out)
+            index = _read_index(out, partial=True)
             old = {item["name"]: item for item in index["models"]}
         except InputError:
             old = {}  # a broken database is rebuilt from scratch
     elif out.exists() and not out.is_dir():
         raise InputError("exists and is not a folder", out)
-    items, built, reused = [], [], []
+    built, reused = [], []
     models = [load_model(src, units=units, scale=scale) for src in sources]  # all checked before any write
     _check_unique([model.name for model in models], [src.path for src in sources])
     plans = []
@@ -296,25 +309,31 @@ def build_database(models: Iterable, out: str | os.PathLike, *, quiet: bool = Fa
                      and file_sha256(out / prev["file"]) == prev["file_sha256"])
         plans.append((src, model, sha, options, prev, fresh))
     todo = [k for k, plan in enumerate(plans) if plan[5]]
-    blobs = dict(zip(todo, _stored(models, todo, quiet=quiet, tips=tips)))
+    items: dict[int, dict] = {}
     for k, (src, model, sha, options, prev, fresh) in enumerate(plans):
         if not fresh:
-            items.append(dict(prev, source=str(src.path)))
+            items[k] = dict(prev, source=str(src.path))
             reused.append(model.name)
-            continue
-        blob, rows = blobs[k]
+    # each model is written as soon as it is built, and the index of those done every INDEX_EVERY
+    # seconds: a stopped build of a large catalogue resumes where it stopped
+    written = time.monotonic()
+    for done, (k, blob, rows) in enumerate(_stored(models, todo, quiet=quiet, tips=tips), 1):
+        src, model, sha, options, _, _ = plans[k]
         name = f"{_safe(model.name)}-{sha[:16]}.npz"
         with atomic_write(out / name, "wb") as handle:
             handle.write(blob)
-        items.append({
+        items[k] = {
             "name": model.name, "kind": model.kind, "units": model.units, "options": options, "file": name,
             "source": str(src.path), "source_sha256": sha, "file_sha256": hashlib.sha256(blob).hexdigest(),
             "table_rows": rows, "table_version": TABLE_VERSION, "store_version": STORE_VERSION,
             "builtin": src.builtin,
-        })
+        }
         built.append(model.name)
-    index = {"format": FORMAT, "version": VERSION, "models": items}
-    write_text_atomic(out / "index.json", json.dumps(index, indent=1) + "\n")
+        if done < len(todo) and time.monotonic() - written > INDEX_EVERY:
+            _write_index(out, [items[j] for j in sorted(items)], complete=False)
+            written = time.monotonic()
+    items = [items[k] for k in range(len(plans))]
+    _write_index(out, items, complete=True)
     keep = {item["file"] for item in items}
     removed = []
     for f in out.glob("*.npz"):
