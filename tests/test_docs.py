@@ -143,3 +143,12 @@ def test_every_part_of_the_package_named_exists(page):
     text = page.read_text(encoding="utf-8")
     missing = sorted({name for name in re.findall(r"`(tactrec(?:\.\w+)+)", text) if not _named(name)})
     assert not missing, f"{page.name}: no such part of the package: {', '.join(missing)}"
+
+
+def test_a_newcomer_finds_set_up_a_python_call_and_the_result_in_the_readmes_first_hundred_lines():
+    lines = (ROOT / "README.md").read_text(encoding="utf-8").splitlines()
+    assert len(lines) <= 250
+    head = "\n".join(lines[:100])
+    assert "make demo" in head and "make test" in head
+    assert "import tactrec" in head and "tactrec.recognize(" in head
+    assert "## The result" in head and '"ranking"' in head
