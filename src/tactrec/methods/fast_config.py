@@ -46,13 +46,6 @@ class Tier:
             raise ValueError("a tier of folded places is a field tier")
 
 
-#: the default schedule, coarse to fine
-TIERS = (Tier(500, "field"), Tier(500, "field", folded=True), Tier(24), Tier(None, "field"),
-         Tier(None, "field", 60.0))
-#: the exhaustive reference: every vertex, every 30 degrees
-EXHAUSTIVE = (Tier(None, "all"),)
-
-
 #: the default schedule, coarse to fine: the best 500 places by curvature screened on the field, the
 #: best 500 folded places (for a touch whose normals disagree across scales), the 24 places whose
 #: curvature matches best posed by their frames, every place on the field, every place with the
