@@ -40,6 +40,7 @@ BENCHMARKS: dict[str, Benchmark] = {
     "paper-steps": Benchmark("paper_steps", "run", "the paper method's steps one at a time, on P3's touches"),
     "fast-vs-paper": Benchmark("fast_vs_paper", "run", "fast against paper on the same P3 and hard touches, in one run"),
     "scale": Benchmark("scale", "run_scale", "recognition among all 78 YCB scans: top-1, top-3, time"),
+    "scale-out": Benchmark("scale_out", "run", "1,078 models (78 scans, 1,000 generated): top-1, top-3, near twins, time, memory"),
     "scale-exhaustive": Benchmark("scale", "run_exhaustive", "among 78 scans, fast against an exhaustive search"),
     "baselines": Benchmark("baselines", "run", "Open3D's registrations on the same touches (make install-baselines)"),
     "fit-limit": Benchmark("fit_limit", "run", "which misses the best-fit rule itself makes"),
