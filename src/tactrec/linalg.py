@@ -11,13 +11,139 @@ decide between near-equal entries.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 __all__ = ["transform", "rotate", "compose", "solve_spd", "gram", "stable_order", "stable_prefix", "clearly_less",
-           "QUANTUM"]
+           "QUANTUM", "dot3", "norm3", "det3", "times", "eigh", "eigvalsh", "lstsq", "inverse_spd", "RANK_TOL"]
 
 #: relative size of the score bands within which :func:`stable_order` breaks ties by index
 QUANTUM = 1e-9
+#: a column counts as dependent in :func:`lstsq` where its squared sine to the others' span is below this
+RANK_TOL = 1e-12
+
+
+def dot3(a, b) -> np.ndarray:
+    """``a . b`` along the last axis of 3-vectors ``a (..., 3)``, ``b (..., 3)`` (broadcast): ``rows @ v``,
+    ``v @ v`` without the BLAS."""
+    a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+    return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
+
+
+def norm3(v) -> np.ndarray:
+    """Euclidean length along the last axis of 3-vectors ``v (..., 3)``."""
+    return np.sqrt(dot3(v, v))
+
+
+def det3(M) -> float:
+    """The determinant of a 3 x 3 matrix (its rows' triple product)."""
+    M = np.asarray(M, dtype=np.float64)
+    return float(dot3(M[0], np.cross(M[1], M[2])))
+
+
+def times(X, M) -> np.ndarray:
+    """``X @ M`` for rows ``X (..., k)`` and one small matrix ``M (k, m)``: a sum of ``k`` scaled rows of
+    ``M``, in index order (``X @ L.T`` is ``times(X, L.T)``)."""
+    X, M = np.asarray(X, dtype=np.float64), np.asarray(M, dtype=np.float64)
+    out = X[..., 0, None] * M[0]
+    for i in range(1, M.shape[0]):
+        out = out + X[..., i, None] * M[i]
+    return out
+
+
+def eigh(A) -> tuple[np.ndarray, np.ndarray]:
+    """Eigenvalues ``(k,)`` (ascending) and eigenvectors (columns of ``(k, k)``) of a small symmetric
+    matrix ``A (k, k)``, by cyclic Jacobi rotations in Python floats.
+
+    The eigenvalues are accurate to a few units in the last place of the largest; equal ones keep
+    their order on the diagonal.  Each eigenvector's sign makes its largest component (the first of
+    equal ones) positive, so the answer is the same wherever it is computed."""
+    k = len(A)
+    a = [[float(A[i][j]) for j in range(k)] for i in range(k)]
+    v = [[1.0 if i == j else 0.0 for j in range(k)] for i in range(k)]
+    for _ in range(100):
+        rotated = False
+        for p in range(k - 1):
+            for q in range(p + 1, k):
+                apq = a[p][q]
+                if apq == 0.0:
+                    continue
+                if abs(apq) <= 1e-18 * (abs(a[p][p]) + abs(a[q][q])):     # below every rounding of the diagonal
+                    a[p][q] = a[q][p] = 0.0
+                    continue
+                rotated = True
+                theta = (a[q][q] - a[p][p]) / (2.0 * apq)
+                t = math.copysign(1.0, theta) / (abs(theta) + math.hypot(theta, 1.0))
+                c = 1.0 / math.sqrt(t * t + 1.0)
+                s = t * c
+                a[p][p] -= t * apq
+                a[q][q] += t * apq
+                a[p][q] = a[q][p] = 0.0
+                for r in range(k):
+                    if r != p and r != q:
+                        arp, arq = a[r][p], a[r][q]
+                        a[r][p] = a[p][r] = c * arp - s * arq
+                        a[r][q] = a[q][r] = s * arp + c * arq
+                for r in range(k):
+                    vrp, vrq = v[r][p], v[r][q]
+                    v[r][p], v[r][q] = c * vrp - s * vrq, s * vrp + c * vrq
+        if not rotated:
+            break
+    order = sorted(range(k), key=lambda i: (a[i][i], i))
+    w = np.array([a[i][i] for i in order])
+    V = np.array([[v[r][i] for i in order] for r in range(k)])
+    for j in range(k):
+        if V[int(np.argmax(np.abs(V[:, j]))), j] < 0:
+            V[:, j] = -V[:, j]
+    return w, V
+
+
+def eigvalsh(A) -> np.ndarray:
+    """The eigenvalues ``(k,)`` of a small symmetric matrix, ascending (:func:`eigh`)."""
+    return eigh(A)[0]
+
+
+def inverse_spd(A) -> np.ndarray:
+    """The inverse of one symmetric positive definite matrix ``A (k, k)`` (:func:`solve_spd`)."""
+    A = np.asarray(A, dtype=np.float64)
+    k = len(A)
+    return solve_spd(np.broadcast_to(A, (k, k, k)), np.eye(k))               # row i: A^-1 e_i
+
+
+def lstsq(A, y, *, tol: float = RANK_TOL) -> tuple[np.ndarray, int]:
+    """Least-squares ``x`` minimising ``|A x - y|`` for a tall ``A (m, k)`` and ``y (m,)`` or
+    ``(m, n)``, by the normal equations (:func:`gram`, :func:`solve_spd`), and the rank of ``A``.
+
+    A column whose squared sine to the span of the ones before it is below ``tol`` counts as
+    dependent: the rank drops and its coefficient is 0 (the fit is as good, though ``x`` is not
+    the shortest one).  Meant for well-conditioned bases (polynomials on ``[-1, 1]``), where the
+    normal equations lose nothing that matters."""
+    A, y = np.asarray(A, dtype=np.float64), np.asarray(y, dtype=np.float64)
+    G = gram(A[None])[0]
+    k = G.shape[0]
+    d = [math.sqrt(G[j, j]) for j in range(k)]
+    L = [[0.0] * k for _ in range(k)]           # Cholesky of the unit-diagonal G over the kept columns
+    keep: list[int] = []
+    for j in range(k):
+        if not d[j] > 0:
+            continue
+        row = [0.0] * k
+        for n, i in enumerate(keep):
+            s = G[j, i] / (d[j] * d[i]) - math.fsum(row[p] * L[i][p] for p in keep[:n])
+            row[i] = s / L[i][i]
+        pivot = 1.0 - math.fsum(row[i] * row[i] for i in keep)
+        if pivot > tol:
+            row[j] = math.sqrt(pivot)
+            L[j] = row
+            keep.append(j)
+    Y = y.reshape(len(y), -1)
+    x = np.zeros((k, Y.shape[1]))
+    if keep:
+        Gk = np.broadcast_to(G[np.ix_(keep, keep)], (Y.shape[1], len(keep), len(keep)))
+        b = np.stack([np.sum(A[:, keep] * Y[:, i, None], axis=0) for i in range(Y.shape[1])])
+        x[keep] = solve_spd(Gk, b).T
+    return (x[:, 0] if y.ndim == 1 else x), len(keep)
 
 
 def rotate(R: np.ndarray, v: np.ndarray) -> np.ndarray:
