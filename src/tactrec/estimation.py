@@ -27,6 +27,7 @@ import numpy as np
 from .errors import InputError
 from .io.meeting import find_contact
 from .io.touch import TactileData
+from .linalg import dot3, eigh, eigvalsh, gram, inverse_spd, lstsq, norm3
 
 __all__ = [
     "CurveFit", "LocalGeometry", "fit_curve", "data_normal", "principal_curvatures",
@@ -187,8 +188,10 @@ def _fit_adaptive(points: np.ndarray, contact: np.ndarray, i0: int, degree: int)
 def _sampling_plane(points: np.ndarray):
     """In-plane axes ``e1`` (along the curve), ``e2`` and the plane's normal."""
     centred = points - points.mean(axis=0)
-    _, _, vt = np.linalg.svd(centred, full_matrices=False)
-    e1, plane_normal = vt[0], vt[2]
+    _, v = eigh(gram(centred[None])[0])                  # the scatter's axes, largest last
+    e1, plane_normal = v[:, 2], v[:, 0]
+    if dot3(points[-1] - points[0], e1) < 0:             # e1 runs from the first point to the last
+        e1 = -e1
     return e1, np.cross(plane_normal, e1), plane_normal
 
 
@@ -198,13 +201,13 @@ def _fit_polynomial(points: np.ndarray, contact: np.ndarray, degree: int, *, sig
     ``contact`` and their standard errors ``(2,)`` for noise ``sigma``."""
     e1, e2, plane_normal = _sampling_plane(points) if plane is None else plane
     rel = points - contact
-    x, y = rel @ e1, rel @ e2
+    x, y = dot3(rel, e1), dot3(rel, e2)
     h = float(np.max(np.abs(x))) or 1.0
     X = x / h
     if degree < 2:
         raise ValueError("the fitted polynomial needs degree 2 or more")
     A = np.vander(X, degree + 1, increasing=True)              # 1, X, X^2, ...
-    coef, _, rank, _ = np.linalg.lstsq(A, y, rcond=None)
+    coef, rank = lstsq(A, y)
     if rank < degree + 1:
         raise ValueError(f"too few distinct points to fit a polynomial of degree {degree}")
     slope = coef[1] / h
@@ -214,7 +217,7 @@ def _fit_polynomial(points: np.ndarray, contact: np.ndarray, degree: int, *, sig
     curvature = abs(second) / norm**3
     pn2 = np.sign(second) * np.array([-slope, 1.0]) / norm if second != 0 else np.array([-slope, 1.0]) / norm
     principal_normal = pn2[0] * e1 + pn2[1] * e2
-    cov = np.linalg.pinv(A.T @ A)
+    cov = inverse_spd(gram(A[None])[0])                  # full rank: A's columns are independent
     se = sigma * np.sqrt(np.array([cov[1, 1] / h**2, 4.0 * cov[2, 2] / h**4]))
     fit = CurveFit(tangent, principal_normal, float(curvature), plane_normal)
     return fit, np.array([slope, second]), se
@@ -224,16 +227,16 @@ def data_normal(tangents: np.ndarray) -> np.ndarray:
     """Unit ``N`` minimising ``sum_i (N . T_i)^2`` (eq. 1): the eigenvector of
     ``sum T_i T_i^T`` with the smallest eigenvalue."""
     T = np.asarray(tangents, dtype=np.float64)
-    w, v = np.linalg.eigh(T.T @ T)
+    _, v = eigh(gram(T[None])[0])
     return v[:, 0]
 
 
 # ---------------------------------------------------------------------- curvatures
 def _tangent_angles(tangents: np.ndarray, normal: np.ndarray):
-    b1 = tangents[0] - (tangents[0] @ normal) * normal
-    b1 /= np.linalg.norm(b1)
+    b1 = tangents[0] - dot3(tangents[0], normal) * normal
+    b1 /= norm3(b1)
     b2 = np.cross(normal, b1)
-    psi = np.arctan2(tangents @ b2, tangents @ b1)
+    psi = np.arctan2(dot3(tangents, b2), dot3(tangents, b1))
     return psi, b1, b2
 
 
@@ -268,7 +271,7 @@ def principal_curvatures(tangents: np.ndarray, normal: np.ndarray, kn: np.ndarra
         raise ValueError(f"unknown method {method!r}")
     if result is None:
         A = np.stack([np.ones_like(psi), np.cos(2 * psi), np.sin(2 * psi)], axis=1)
-        (H, B, C), *_ = np.linalg.lstsq(A, kn, rcond=None)
+        (H, B, C), _ = lstsq(A, kn)
         R = np.hypot(B, C)
         k1, k2, angle = H + R, H - R, 0.5 * np.arctan2(C, B)
     else:
@@ -322,20 +325,20 @@ def estimate(data: TactileData, *, window: int | str | None = "auto", degree: in
     except ValueError as exc:
         raise InputError(str(exc), data.source) from None
     tangents = np.array([f.tangent for f in fits])
-    w = np.linalg.eigvalsh(tangents.T @ tangents)
+    w = eigvalsh(gram(tangents[None])[0])
     if w[1] < 1e-3 * w[2]:                   # three planes about 2 degrees apart; the paper goes down to 10
         raise InputError("the curves are (nearly) tangent to one another at the contact: "
                          "their planes must cross at distinct angles", data.source)
     normal = data_normal(tangents)
     if data.outward is not None:
         oriented = True
-        if normal @ data.outward < 0:
+        if dot3(normal, data.outward) < 0:
             normal = -normal
     else:
         oriented = False
-        offsets = np.concatenate([(c - contact) @ normal for c in data.curves])
+        offsets = np.concatenate([dot3(c - contact, normal) for c in data.curves])
         if np.mean(offsets) > 0:
             normal = -normal
-    kn = np.array([f.curvature * (f.principal_normal @ normal) for f in fits])
+    kn = np.array([f.curvature * dot3(f.principal_normal, normal) for f in fits])
     k1, k2, directions = principal_curvatures(tangents, normal, kn, method=method)
     return LocalGeometry(contact, normal, k1, k2, directions, tangents, kn, oriented)
