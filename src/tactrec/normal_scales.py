@@ -31,6 +31,8 @@ import dataclasses
 
 import numpy as np
 
+from .linalg import eigh, gram, norm3
+
 __all__ = ["Scales", "cone_normals", "chord_normal"]
 
 
@@ -68,7 +70,7 @@ def _point_at(curve: np.ndarray, i0: int, step: int, length: float) -> np.ndarra
     interpolated; None where the curve ends first."""
     arc, i = 0.0, i0
     while 0 <= i + step < len(curve):
-        piece = float(np.linalg.norm(curve[i + step] - curve[i]))
+        piece = float(norm3(curve[i + step] - curve[i]))
         if arc + piece >= length:
             a = (length - arc) / piece if piece > 0 else 0.0
             return curve[i] + a * (curve[i + step] - curve[i])
@@ -83,7 +85,7 @@ def chord_normal(chords: np.ndarray, side: np.ndarray) -> np.ndarray:
     chords lie in the tangent plane, their mean is about zero, and this is eq. 1 on the chords."""
     u = chords / np.linalg.norm(chords, axis=1, keepdims=True)
     c = u - u.mean(axis=0)
-    _, v = np.linalg.eigh(c.T @ c)
+    _, v = eigh(gram(c[None])[0])
     n = v[:, 0]
     return n if float(np.sum(n * side)) >= 0 else -n
 

@@ -81,6 +81,7 @@ from typing import Sequence
 import numpy as np
 
 from .bootstrap import REPLICATES, SEED, bootstrap_probabilities, lag_one
+from .linalg import times
 
 __all__ = ["Evidence", "residuals", "evidence", "bootstrap_probabilities", "noise_fit", "fit_limit", "resolution",
            "fit_standard_error", "fit_spread", "open_world", "AMBIGUOUS", "REPLICATES", "UNKNOWN_PRIOR",
@@ -210,7 +211,7 @@ def residuals(model, rotation: np.ndarray, translation: np.ndarray, points: np.n
               scale: float = 1.0) -> np.ndarray:
     """Signed distances ``(m,)`` of data ``points (m, 3)`` (data units) to ``model`` under the pose
     ``model = scale * rotation @ data + translation``, in data units (positive outside)."""
-    moved = scale * (np.asarray(points, dtype=np.float64) @ np.asarray(rotation).T) + np.asarray(translation)
+    moved = scale * times(points, np.asarray(rotation).T) + np.asarray(translation)
     return np.asarray(model.planes(moved)[0], dtype=np.float64) / scale
 
 

@@ -77,6 +77,7 @@ import dataclasses
 import numpy as np
 
 from .estimation import LocalGeometry
+from .linalg import lstsq
 from .surfaces.offset import FOOT_STEPS, Offset, foot_distance, offset
 
 __all__ = ["EDGE", "SHARP", "bends", "traceable", "corrected", "surface_normals", "surface_curves", "Offset", "offset", "foot_distance",
@@ -138,7 +139,7 @@ def _tangents(curve: np.ndarray) -> np.ndarray:
     u = (s - 0.5 * (s[-1] + s[0])) / half
     degree = int(max(2, min(TANGENT_DEGREE, (len(curve) - 1) // 4)))
     V = np.polynomial.legendre.legvander(u, degree)
-    coef, *_ = np.linalg.lstsq(V, curve, rcond=None)                       # (degree + 1, 3)
+    coef, _ = lstsq(V, curve)                                              # (degree + 1, 3)
     d = np.polynomial.legendre.legder(coef, axis=0)
     T = np.sum(np.polynomial.legendre.legvander(u, degree - 1)[:, :, None] * d[None], axis=1)   # element-wise
     return T / np.linalg.norm(T, axis=1, keepdims=True)

@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import InputError
+from ..linalg import norm3
 
 __all__ = ["closest_on_polyline", "find_contact", "meeting_points", "meeting", "check_meeting", "MEETING"]
 
@@ -57,7 +58,7 @@ def _settled(x: np.ndarray, curves) -> np.ndarray:
     for _ in range(50):
         proj = np.array([closest_on_polyline(x[None], c)[0] for c in curves])
         new = proj.mean(axis=0)
-        if np.linalg.norm(new - x) < 1e-12 * (1.0 + np.linalg.norm(x)):
+        if norm3(new - x) < 1e-12 * (1.0 + norm3(x)):
             x = new
             break
         x = new
@@ -100,8 +101,8 @@ def meeting(data) -> tuple[np.ndarray, np.ndarray]:
     ``contact``, else the least-squares point of :func:`find_contact`) and each curve's distance from
     it ``(k,)`` (data units)."""
     contact = np.asarray(data.contact, dtype=np.float64) if data.contact is not None else find_contact(data.curves)
-    gaps = np.array([float(np.linalg.norm(closest_on_polyline(contact[None], np.asarray(c, dtype=np.float64))[0]
-                                          - contact)) for c in data.curves])
+    gaps = np.array([float(norm3(closest_on_polyline(contact[None], np.asarray(c, dtype=np.float64))[0] - contact))
+                     for c in data.curves])
     return contact, gaps
 
 

@@ -20,6 +20,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from ..errors import InputError
+from ..linalg import norm3, times
 from ..units import unit_scale
 from .atomic import write_text_atomic
 from .meeting import check_meeting
@@ -81,7 +82,7 @@ class TactileData:
         c = None if contact is None else _vector(contact, "contact", source)
         o = None if outward is None else _vector(outward, "outward", source)
         if o is not None:
-            norm = np.linalg.norm(o)
+            norm = norm3(o)
             if norm == 0:
                 raise InputError("'outward' must be a non-zero direction", source)
             o = o / norm
@@ -109,12 +110,12 @@ class TactileData:
         """The same touch in another frame: ``x -> scale * (R x + t)``."""
         R = np.asarray(rotation, dtype=np.float64)
         t = np.asarray(translation, dtype=np.float64)
-        move = lambda p: scale * (p @ R.T + t)  # noqa: E731
+        move = lambda p: scale * (times(p, R.T) + t)  # noqa: E731
         return dataclasses.replace(
             self,
             curves=tuple(move(c) for c in self.curves),
             contact=None if self.contact is None else move(self.contact),
-            outward=None if self.outward is None else self.outward @ R.T,
+            outward=None if self.outward is None else times(self.outward, R.T),
             tip_radius=scale * self.tip_radius,
         )
 

@@ -24,6 +24,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..estimation import LocalGeometry
+from ..linalg import compose, norm3, rotate, times
 from ..surfaces.closedform import ClosedFormSurface
 from ..tables import CurvatureTable
 from .closedform_paper import Superposition
@@ -52,10 +53,10 @@ def refine(model: ClosedFormSurface, R: np.ndarray, t: np.ndarray, x: np.ndarray
 def _result(model, geometry, R, t, error, start, candidates) -> Registration | None:
     """The registration, or ``None`` if the contact has left the declared patch (the implicit
     surface of eq. 11 goes on beyond it)."""
-    p = R @ geometry.contact + t
+    p = rotate(R, geometry.contact) + t
     uv = model.locate(p, start=start)
     jet = model.frame_jet(uv[0:1], uv[1:2])
-    if not np.linalg.norm(jet.point[0] - p) <= 3.0 * error + 1e-9 * model.size:
+    if not norm3(jet.point[0] - p) <= 3.0 * error + 1e-9 * model.size:
         return None
     return Registration(model=model.name, error=float(error), location=jet.point[0], rotation=R, translation=t,
                         candidates=candidates, site=uv, phi=None)
@@ -77,7 +78,7 @@ def register(model: ClosedFormSurface, table: CurvatureTable, geometry: LocalGeo
     if np.max(np.linalg.norm(on - geometry.contact, axis=1)) > model.size:
         return Registration.unfitted(model.name, "the touch is larger than the model")
     L = local_frame(geometry.normal, geometry.directions[0])
-    problem = Superposition(model, (on - geometry.contact) @ L.T)
+    problem = Superposition(model, times(on - geometry.contact, L.T))
     uv0 = table.samples.sites[idx]
     phi0, E0 = problem.initial_phi(uv0, samples=phi_samples, bisections=bisections)
     jet = model.frame_jet(uv0[:, 0], uv0[:, 1])
@@ -85,7 +86,7 @@ def register(model: ClosedFormSurface, table: CurvatureTable, geometry: LocalGeo
     if not usable.any():
         return Registration.unfitted(model.name, "registration failed")
     uv0, phi0 = uv0[usable], phi0[usable]
-    R = jet.frame[usable] @ rotations_z(phi0) @ L
+    R = compose(compose(jet.frame[usable], rotations_z(phi0)), L)
     t = jet.point[usable] - np.einsum("hij,j->hi", R, geometry.contact)
     R, t, error = refine(model if exact is None else exact, R, t, x, iterations=iterations)
     for b in np.argsort(error)[:5]:

@@ -28,7 +28,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..estimation import LocalGeometry
-from ..linalg import compose, rotate, stable_order, stable_prefix, transform
+from ..linalg import compose, rotate, stable_order, stable_prefix, times, transform
 from ..surfaces.mesh import MeshModel
 from ..surfaces.mesh_curvature import fitted_frame, quadric_curvatures, tangents
 from .result import Registration, cross, local_frame, rotations_from_vectors, rotations_z
@@ -54,7 +54,7 @@ def data_curvatures(geometry: LocalGeometry, x: np.ndarray, radius: float):
     (data frame): the fitted tangent plane, which a faceted or noisy touch gives more steadily
     than the curves' tangents at the contact."""
     L0 = local_frame(geometry.normal, geometry.tangents[0])
-    local = (x - geometry.contact) @ L0.T
+    local = times(x - geometry.contact, L0.T)
     r = np.linalg.norm(local[:, :2], axis=1)
     near = r <= radius
     if near.sum() < 12:

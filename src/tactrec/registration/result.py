@@ -7,7 +7,7 @@ import enum
 
 import numpy as np
 
-from ..linalg import transform
+from ..linalg import dot3, norm3, transform
 
 __all__ = ["Registration", "Outcome", "local_frame", "rotations_z", "rotations_from_vectors", "cross",
            "apply_poses"]
@@ -130,11 +130,11 @@ def local_frame(normal: np.ndarray, first: np.ndarray | None = None) -> np.ndarr
     ``t1`` is ``first`` projected on the tangent plane, or any tangent.
     """
     n = np.asarray(normal, dtype=np.float64)
-    n = n / np.linalg.norm(n)
+    n = n / norm3(n)
     if first is None:
         first = np.eye(3)[int(np.argmin(np.abs(n)))]
-    t1 = first - (first @ n) * n
-    t1 /= np.linalg.norm(t1)
+    t1 = first - dot3(first, n) * n
+    t1 /= norm3(t1)
     return np.stack([t1, np.cross(n, t1), n])
 
 

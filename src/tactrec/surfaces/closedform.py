@@ -39,6 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from ..linalg import dot3, norm3
 from .base import SiteFrame, SurfaceModel, TableSamples
 from .closedform_sections import project_out, trace_sections, unit_vectors
 from .closedform_spec import Domain, parse_spec
@@ -245,7 +246,7 @@ class ClosedFormSurface(SurfaceModel):
     def size(self) -> float:
         pts = self.evaluate(self._grid[:, 0], self._grid[:, 1])
         pts = pts[np.all(np.isfinite(pts), axis=1)]
-        return float(np.linalg.norm(np.ptp(pts, axis=0)))
+        return float(norm3(np.ptp(pts, axis=0)))
 
     # ------------------------------------------------------------------ table
     def table_samples(self, *, resolution=None, rng=None) -> TableSamples:
@@ -289,10 +290,15 @@ class ClosedFormSurface(SurfaceModel):
             uv = self.wrap(np.asarray(start, dtype=np.float64)[:2])
         for _ in range(30):
             s, su, sv, *_ = self._derivatives(uv[0], uv[1])
-            J = np.stack([su, sv], axis=-1)
-            step, *_ = np.linalg.lstsq(J, point - s, rcond=None)
+            r = point - s
+            a, b, c = dot3(su, su), dot3(su, sv), dot3(sv, sv)            # J^T J for J = [su sv]
+            gu, gv = dot3(su, r), dot3(sv, r)
+            det = a * c - b * b
+            if not det > 0:                                               # a singular point: stay
+                break
+            step = np.array([(c * gu - b * gv) / det, (a * gv - b * gu) / det])
             uv = self.wrap(uv + step)
-            if np.linalg.norm(J @ step) < 1e-13 * max(self.size, 1.0):
+            if norm3(step[0] * su + step[1] * sv) < 1e-13 * max(self.size, 1.0):
                 break
         return uv
 

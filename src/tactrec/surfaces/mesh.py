@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 from scipy import sparse
 
+from ..linalg import norm3
 from .base import SiteFrame, SurfaceModel, TableSamples
 from .mesh_field import DistanceField, build_field
 from .mesh_curvature import CurvatureField, curvature_field, paraboloid_curvatures, tangents, unit_rows
@@ -198,7 +199,7 @@ class MeshModel(SurfaceModel):
 
     @cached_property
     def size(self) -> float:
-        return float(np.linalg.norm(self.bounds[1] - self.bounds[0]))
+        return float(norm3(self.bounds[1] - self.bounds[0]))
 
     @cached_property
     def face_areas(self) -> np.ndarray:
