@@ -27,6 +27,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..estimation import LocalGeometry
+from ..linalg import compose, rotate, times
 from ..surfaces.closedform import ClosedFormSurface
 from ..tables import CurvatureTable
 from .result import Registration, local_frame, rotations_z
@@ -224,7 +225,7 @@ def register(model: ClosedFormSurface, table: CurvatureTable, geometry: LocalGeo
     if len(idx) == 0:
         return Registration.unfitted(model.name, "no candidates")
     L = local_frame(geometry.normal, geometry.directions[0])
-    local = (np.asarray(points, dtype=np.float64) - geometry.contact) @ L.T
+    local = times(np.asarray(points, dtype=np.float64) - geometry.contact, L.T)
     problem = Superposition(model, local)
     uv0 = table.samples.sites[idx]
     phi0, _ = problem.initial_phi(uv0, samples=phi_samples, bisections=bisections)
@@ -233,8 +234,8 @@ def register(model: ClosedFormSurface, table: CurvatureTable, geometry: LocalGeo
     if not np.isfinite(E[best]):
         return Registration.unfitted(model.name, "registration failed")
     jet = model.frame_jet(uv[best:best + 1, 0], uv[best:best + 1, 1])
-    R = jet.frame[0] @ rotations_z(phi[best:best + 1])[0] @ L
+    R = compose(compose(jet.frame[0], rotations_z(phi[best:best + 1])[0]), L)
     q = jet.point[0]
     return Registration(model=model.name, error=float(E[best]), location=q, rotation=R,
-                        translation=q - R @ geometry.contact, candidates=len(idx), site=uv[best],
+                        translation=q - rotate(R, geometry.contact), candidates=len(idx), site=uv[best],
                         phi=float(phi[best]))

@@ -32,6 +32,7 @@ import numpy as np
 from scipy import sparse
 
 from ..estimation import LocalGeometry
+from ..linalg import compose, dot3, eigh, gram, rotate, times
 from ..surfaces.mesh import MeshModel
 from ..tables import CurvatureTable
 from ..units import conversion
@@ -85,16 +86,16 @@ class MeshSuperposition:
         local, offsets, centres, normals, alongs = [], [], [], [], []
         for c in curves:
             c = np.asarray(c, dtype=np.float64)
-            x = (c - geometry.contact) @ L.T
+            x = times(c - geometry.contact, L.T)
             i0 = int(np.argmin(np.linalg.norm(c - geometry.contact, axis=1)))
             arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(c, axis=0), axis=1))])
             centre = x.mean(axis=0)
-            _, _, vt = np.linalg.svd(x - centre, full_matrices=False)
-            along = vt[0] if (x[-1] - x[0]) @ vt[0] >= 0 else -vt[0]
+            _, v = eigh(gram((x - centre)[None])[0])                  # the scatter's axes, largest last
+            along = v[:, 2] if dot3(x[-1] - x[0], v[:, 2]) >= 0 else -v[:, 2]
             local.append(x)
             offsets.append(arc - arc[i0])
             centres.append(centre)
-            normals.append(vt[2])
+            normals.append(v[:, 0])
             alongs.append(along)
         self.radius = max(float(np.max(np.linalg.norm(x, axis=1))) for x in local)
         self.phis = np.deg2rad(np.arange(0.0, 360.0, phi_step))
@@ -257,7 +258,7 @@ class MeshSuperposition:
         frac = np.where(ok, (target - a_i) / np.where(ok, a_j - a_i, 1.0), 0.0).clip(0.0, 1.0)
         flat_pts = pts.reshape(-1, 3)
         ref = (flat_pts[i] + frac[:, None] * (flat_pts[j] - flat_pts[i])).reshape(n, nphi, -1, 3)
-        data = np.matmul(self.points[None], frames.transpose(0, 2, 1)[:, None]) + q[:, None, None, :]
+        data = rotate(frames[:, None, None], self.points[None]) + q[:, None, None, :]
         err = np.linalg.norm(data - ref, axis=-1).mean(axis=-1)                         # (n, f)
         missing = ~found[:, plane].all(axis=-1)
         return np.where(missing, np.inf, err)
@@ -318,7 +319,7 @@ class MeshSuperposition:
 
     def rotation(self, v: int, phi: float) -> np.ndarray:
         """``data2model`` rotation of the superposition at vertex ``v``, angle ``phi``."""
-        return self._frame(v) @ rotations_z(np.array([phi]))[0] @ self.L
+        return compose(compose(self._frame(v), rotations_z(np.array([phi]))[0]), self.L)
 
 
 #: the paper's lookup tolerance for meshes (P3), per millimetre
@@ -355,5 +356,5 @@ def register(model: MeshModel, table: CurvatureTable, geometry: LocalGeometry, p
     R = problem.rotation(v, phi)
     q = model.vertices[v]
     return Registration(model=model.name, error=float(e), location=q.copy(), rotation=R,
-                        translation=q - R @ geometry.contact, candidates=len(idx), site=np.array([float(v)]),
+                        translation=q - rotate(R, geometry.contact), candidates=len(idx), site=np.array([float(v)]),
                         phi=float(phi))
