@@ -46,6 +46,7 @@ import dataclasses
 import numpy as np
 
 from .io.touch import MIN_POINTS
+from .linalg import eigh, gram, norm3
 from .tip import Offset
 
 __all__ = ["Imperfections", "record", "tip_centres"]
@@ -145,7 +146,7 @@ def record(model, frame, tangents: np.ndarray, *, spacing: float, points: int, i
             site = frame.site
             if imp.miss > 0:
                 across = np.cross(frame.normal, tangent)
-                across = across / np.linalg.norm(across) * rng.choice((-1.0, 1.0))
+                across = across / norm3(across) * rng.choice((-1.0, 1.0))
                 site = model.locate(frame.point + imp.miss * across)
             sections.append(model.plane_section(site, tangent, spacing=spacing / fine, count=fine_count))
             sites.append(site)
@@ -154,7 +155,7 @@ def record(model, frame, tangents: np.ndarray, *, spacing: float, points: int, i
         if imp.bend > 0:
             normal = model.site_frame(site).normal
             side = np.cross(tangent, normal)
-            side = side / np.linalg.norm(side) * rng.choice((-1.0, 1.0))
+            side = side / norm3(side) * rng.choice((-1.0, 1.0))
             s = (np.arange(fine_count) - centre) / centre
             curve = model.projected(curve + imp.bend * (s * s * s)[:, None] * side)
         if imp.uneven > 1.0:
@@ -227,9 +228,9 @@ def tip_centres(model, points: np.ndarray, radius: float, *, across: np.ndarray 
     stroke."""
     x = np.asarray(points, dtype=np.float64)
     if across is None:
-        along = np.linalg.svd(x - x.mean(axis=0))[2][0]
+        along = eigh(gram((x - x.mean(axis=0))[None])[0])[1][:, 2]              # the points' main axis
         across = np.cross(along, np.asarray(model.planes(x[len(x) // 2][None])[1], dtype=np.float64)[0])
-    across = np.asarray(across, dtype=np.float64) / np.linalg.norm(across)
+    across = np.asarray(across, dtype=np.float64) / norm3(across)
     centres, _ = _pushed_out(model, x, radius, across, iterations)
     steps = np.linalg.norm(np.diff(x, axis=0), axis=1)
     piece = float(steps[steps > 0].min(initial=np.inf)) / 8.0

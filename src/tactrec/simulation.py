@@ -20,6 +20,7 @@ from scipy.spatial.transform import Rotation
 
 from .errors import InputError
 from .io.touch import TactileData
+from .linalg import compose, dot3, rotate, times
 from .sensor import Imperfections, record
 from .surfaces.base import SurfaceModel
 
@@ -111,7 +112,7 @@ def simulate_touch(model: SurfaceModel, site, *, points: int = 61, spacing: floa
         R, t = random_rigid_motion(rng, extent=model.size)
         data = data.transformed(R, t)
         truth["rotation"] = R.T.tolist()            # data -> model
-        truth["translation"] = (-R.T @ t).tolist()
+        truth["translation"] = (-rotate(R.T, t)).tolist()
     else:
         truth["rotation"] = np.eye(3).tolist()
         truth["translation"] = [0.0, 0.0, 0.0]
@@ -176,7 +177,7 @@ def truth_pose(data: TactileData) -> tuple[np.ndarray, np.ndarray]:
 def truth_contact(data: TactileData) -> np.ndarray:
     """The true contact ``(3,)`` of a simulated touch in the data's own frame."""
     R, t = truth_pose(data)
-    return R.T @ (np.asarray(data.meta["truth"]["contact"], dtype=np.float64) - t)
+    return rotate(R.T, np.asarray(data.meta["truth"]["contact"], dtype=np.float64) - t)
 
 
 def sensor_to_world(data: TactileData, model2world) -> tuple[np.ndarray, np.ndarray]:
@@ -185,7 +186,7 @@ def sensor_to_world(data: TactileData, model2world) -> tuple[np.ndarray, np.ndar
     truth = data.meta["truth"]
     Rd, td = np.asarray(truth["rotation"], dtype=np.float64), np.asarray(truth["translation"], dtype=np.float64)
     Rw, tw = (np.asarray(a, dtype=np.float64) for a in model2world)
-    return Rw @ Rd, Rw @ td + tw
+    return compose(Rw, Rd), rotate(Rw, td) + tw
 
 
 def simulate_world_touch(model: SurfaceModel, world2model, contact, directions, *, points: int, spacing: float,
@@ -199,18 +200,18 @@ def simulate_world_touch(model: SurfaceModel, world2model, contact, directions, 
     Raises ``ValueError`` where a curve leaves the surface."""
     R, t, s = np.asarray(world2model[0], dtype=np.float64), np.asarray(world2model[1], dtype=np.float64), \
         float(world2model[2])
-    site = model.locate(s * (np.asarray(contact, dtype=np.float64) @ R.T) + t)
+    site = model.locate(s * times(contact, R.T) + t)
     frame = model.site_frame(site)
-    u, v = np.asarray(directions, dtype=np.float64)[:2] @ R.T                          # model frame
-    first = float(np.arctan2(u @ frame.d2, u @ frame.d1))
-    angle = float(np.degrees((np.arctan2(v @ frame.d2, v @ frame.d1) - first) % (2 * np.pi)))
+    u, v = times(np.asarray(directions, dtype=np.float64)[:2], R.T)                    # model frame
+    first = float(np.arctan2(dot3(u, frame.d2), dot3(u, frame.d1)))
+    angle = float(np.degrees((np.arctan2(dot3(v, frame.d2), dot3(v, frame.d1)) - first) % (2 * np.pi)))
     rng = np.random.default_rng(rng)
     data = simulate_touch(model, site, points=points, spacing=spacing * s, angle=angle, first_direction=first,
                           noise=noise * s, noise_kind=noise_kind, outward=outward, sensor_frame=sensor_frame, rng=rng)
     truth = data.meta["truth"]
     Rd, td = np.asarray(truth["rotation"]), np.asarray(truth["translation"])          # data -> model
     # world = R^T (model - t) / s = R^T (Rd data + td - t) / s
-    R_sw = R.T @ Rd
-    t_sw = R.T @ (td - t) / s
+    R_sw = compose(R.T, Rd)
+    t_sw = rotate(R.T, td - t) / s
     world = data.transformed(np.eye(3), np.zeros(3), scale=1.0 / s)
     return dataclasses.replace(world, meta=data.meta, source=data.source), (R_sw, t_sw)

@@ -6,6 +6,8 @@ import math
 
 import numpy as np
 
+from ..linalg import dot3
+
 __all__ = ["trace_sections", "unit_vectors", "project_out"]
 
 
@@ -47,11 +49,11 @@ def trace_sections(surface, site, tangents, *, spacing: float, count: int, subst
         nn = surface._orientation(s_, np.cross(su, sv))[:, None] * unit_vectors(np.cross(su, sv))[0]
         t = unit_vectors(np.cross(m, nn))[0]
         t = np.where(np.sum(t * prev_, axis=1, keepdims=True) < 0, -t, t)
-        J = np.stack([su, sv], axis=-1)                             # (2k, 3, 2)
-        JtJ = np.einsum("kia,kib->kab", J, J)
-        Jt_t = np.einsum("kia,ki->ka", J, t)
+        a, b, c = dot3(su, su), dot3(su, sv), dot3(sv, sv)           # J^T J for J = [su sv], 2 x 2
+        gu, gv = dot3(su, t), dot3(sv, t)
         with np.errstate(all="ignore"):
-            w = np.linalg.solve(JtJ, Jt_t[..., None])[..., 0]
+            det = a * c - b * b
+            w = np.stack([(c * gu - b * gv) / det, (a * gv - b * gu) / det], axis=-1)
         return w, t
 
     for _ in range(nsteps):

@@ -27,11 +27,11 @@ from pathlib import Path
 import numpy as np
 from scipy import sparse
 
-from ..linalg import norm3
+from ..linalg import dot3, norm3, times
 from .base import SiteFrame, SurfaceModel, TableSamples
 from .mesh_field import DistanceField, build_field
 from .mesh_curvature import CurvatureField, curvature_field, paraboloid_curvatures, tangents, unit_rows
-from .mesh_sections import resample_polyline, segment_distance
+from .mesh_sections import plane_section, resample_polyline, segment_distance
 
 __all__ = ["MeshModel", "MESH_SUFFIXES", "paraboloid_curvatures", "resample_polyline"]
 
@@ -337,8 +337,8 @@ class MeshModel(SurfaceModel):
             f = int(site[0])
             b = np.array([1.0 - site[1] - site[2], site[1], site[2]])
             corners = self.faces[f]
-            point = b @ self.vertices[corners]
-            normal = unit_rows(b @ self.vertex_normals[corners])
+            point = times(b, self.vertices[corners])
+            normal = unit_rows(times(b, self.vertex_normals[corners]))
         else:
             raise ValueError("a mesh site is [vertex] or [face, b1, b2]")
         d1, d2 = tangents(normal[None])
@@ -352,12 +352,12 @@ class MeshModel(SurfaceModel):
 
     def locate(self, point) -> np.ndarray:
         """``[face, b1, b2]`` of the surface point nearest to ``point``."""
-        import trimesh
-
         _, face, closest = self.closest_points(np.asarray(point, dtype=float)[None])
-        tri = self.vertices[self.faces[int(face[0])]]
-        bary = trimesh.triangles.points_to_barycentric(tri[None], closest)[0]
-        return np.array([float(face[0]), bary[1], bary[2]])
+        a, b, c = self.vertices[self.faces[int(face[0])]]
+        e0, e1, w = b - a, c - a, closest[0] - a                 # Cramer's rule, as trimesh's barycentric
+        d00, d01, d11, d0w, d1w = dot3(e0, e0), dot3(e0, e1), dot3(e1, e1), dot3(e0, w), dot3(e1, w)
+        det = d00 * d11 - d01 * d01
+        return np.array([float(face[0]), (d11 * d0w - d01 * d1w) / det, (d00 * d1w - d01 * d0w) / det])
 
     def random_sites(self, count: int, *, rng=None) -> np.ndarray:
         """Random vertices (the paper's P3 places touches on vertices)."""
@@ -369,9 +369,9 @@ class MeshModel(SurfaceModel):
         its normal and ``tangent``, at equal arc length, centred on the site."""
         frame = self.site_frame(site)
         p, n = frame.point, frame.normal
-        t = unit_rows(np.asarray(tangent, dtype=float) - (np.asarray(tangent, dtype=float) @ n) * n)
+        t = unit_rows(np.asarray(tangent, dtype=float) - dot3(tangent, n) * n)
         m = np.cross(n, t)
-        section = self._trimesh.section(plane_origin=p, plane_normal=m)
+        section = plane_section(self.vertices, self.faces, p, m)
         if section is None:
             raise ValueError("the plane does not cut the mesh")
         best, best_d = None, np.inf

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..linalg import dot3
+
 __all__ = ["resample_polyline", "segment_distance"]
 
 
@@ -36,7 +38,7 @@ def resample_polyline(line: np.ndarray, anchor: np.ndarray, along: np.ndarray, o
     seg = np.linalg.norm(np.diff(line, axis=0), axis=1)
     arc = np.concatenate([[0.0], np.cumsum(seg)])
     k, t, _ = _project_on_polyline(line, anchor)
-    direction = 1.0 if (line[k + 1] - line[k]) @ along >= 0 else -1.0
+    direction = 1.0 if dot3(line[k + 1] - line[k], along) >= 0 else -1.0
     targets = arc[k] + t * seg[k] + direction * np.asarray(offsets, dtype=float)
     if closed:
         targets = np.mod(targets, arc[-1])
@@ -45,3 +47,42 @@ def resample_polyline(line: np.ndarray, anchor: np.ndarray, along: np.ndarray, o
     return np.stack([np.interp(targets, arc, line[:, i]) for i in range(3)], axis=1)
 
 
+
+
+def plane_section(vertices: np.ndarray, faces: np.ndarray, origin: np.ndarray, normal: np.ndarray):
+    """The section of the mesh ``vertices, faces`` by the plane through ``origin`` with ``normal``: a
+    trimesh ``Path3D``, or None where the plane misses the mesh.
+
+    The cases and segments of trimesh's ``mesh_plane`` (a vertex within ``1e-8`` of the plane is on
+    it), with the vertices' heights and the edges' crossings in element-wise arithmetic: trimesh
+    takes them from the BLAS, whose kernels round differently on different CPUs."""
+    from trimesh.grouping import unique_value_in_row
+    from trimesh.path.exchange.misc import lines_to_path
+    from trimesh.path.path import Path3D
+
+    origin, normal = np.asarray(origin, dtype=np.float64), np.asarray(normal, dtype=np.float64)
+    dots = dot3(vertices - origin, normal)
+    signs = np.zeros(len(vertices), dtype=np.int8)
+    signs[dots < -1e-8] = -1
+    signs[dots > 1e-8] = 1
+    signs = signs[faces]
+    coded = np.full(len(faces), 14, dtype=np.int8)
+    for i, column in enumerate(np.sort(signs, axis=1).T):
+        coded += column << 3 - i
+    basic, one_vertex, one_edge = np.isin(coded, (4, 12)), coded == 8, coded == 16
+
+    def crossing(edges):                         # where the edges (2, k) cross the plane
+        a, b = vertices[edges[0]], vertices[edges[1]]
+        t = dot3(origin - a, normal) / dot3(b - a, normal)
+        return a + t[:, None] * (b - a)
+
+    f, s = faces[basic], signs[basic]
+    alone = unique_value_in_row(s, unique=[-1, 1])
+    edges = np.column_stack((f[alone], f[np.roll(alone, 1, axis=1)], f[alone], f[np.roll(alone, 2, axis=1)]))
+    lines = [crossing(edges.reshape(-1, 2).T).reshape(-1, 2, 3)]
+    f, s = faces[one_vertex], signs[one_vertex]
+    lines.append(np.column_stack((vertices[f[s == 0]], crossing(f[s != 0].reshape(-1, 2).T))).reshape(-1, 2, 3))
+    f, s = faces[one_edge], signs[one_edge]
+    lines.append(vertices[f[s == 0].reshape(-1, 2)])
+    lines = np.vstack(lines)
+    return Path3D(**lines_to_path(lines)) if len(lines) else None
