@@ -22,6 +22,7 @@ from typing import Sequence
 import numpy as np
 
 from ..errors import InputError
+from ..linalg import compose, det3, norm3, rotate, times
 from .atomic import write_text_atomic
 from .meeting import check_meeting
 from .touch import TactileData, _check_reach, _read_text, _vector, load_touch, number, parse_touch
@@ -41,7 +42,7 @@ def rigid_pose(rotation, translation, source: str, what: str = "sensor2world") -
         raise InputError(f"'{what}' rotation must be a 3 x 3 array of finite numbers", source)
     if np.max(np.abs(R)) > 2.0:
         raise InputError(f"'{what}' rotation is not a rotation (an entry reaches {np.max(np.abs(R)):.3g})", source)
-    if np.max(np.abs(R @ R.T - np.eye(3))) > 1e-6 or np.linalg.det(R) < 0:
+    if np.max(np.abs(compose(R, R.T) - np.eye(3))) > 1e-6 or det3(R) < 0:
         raise InputError(f"'{what}' rotation is not a rotation (orthonormal, determinant +1)", source)
     return R, _vector(translation, f"{what} translation", source)
 
@@ -88,7 +89,7 @@ class MissedLine:
             raise InputError("'missed' must be an object with 'start', 'direction' and 'length'", source)
         start = _vector(obj["start"], "missed start", source)
         direction = _vector(obj["direction"], "missed direction", source)
-        norm = float(np.linalg.norm(direction))
+        norm = float(norm3(direction))
         if norm <= 1e-12:
             raise InputError("'missed' direction has no length", source)
         length = number(obj["length"], "missed length", source)
@@ -98,7 +99,7 @@ class MissedLine:
 
     def transformed(self, rotation: np.ndarray, translation: np.ndarray) -> "MissedLine":
         """The line under ``x -> rotation @ x + translation``."""
-        return MissedLine(rotation @ self.start + translation, rotation @ self.direction, self.length)
+        return MissedLine(rotate(rotation, self.start) + translation, rotate(rotation, self.direction), self.length)
 
     def points(self, step: float) -> np.ndarray:
         """Points along the line ``(n, 3)``, at most ``step`` apart (both ends included; at most
@@ -188,7 +189,7 @@ def parse_session_touch(item, source: str, units: str | None = None):
                              source)
         return SessionMiss(MissedLine.parse(item["missed"], source), R, t, item.get("units"))
     data = parse_touch(item, source)
-    _check_reach([c @ R.T + t for c in data.curves], source)          # in the world frame too
+    _check_reach([times(c, R.T) + t for c in data.curves], source)    # in the world frame too
     check_meeting(data)
     return SessionTouch(data, R, t)
 

@@ -110,6 +110,7 @@ import dataclasses
 import numpy as np
 
 from ..io.session import MissedLine
+from ..linalg import times
 from ..probability import CONSISTENT_SE
 from ..missed import depth_excess
 from .disagreement import places, touched_side
@@ -321,8 +322,8 @@ def _best_line(session, leading: list, weights: np.ndarray, *, radius: float, an
             if any(models[g.model].planes(to_model(g, line.start)[None])[0][0] <= 0.0 for g in poses):
                 continue                                                  # starts inside some pose's surface
             start = rng.uniform(0.0, 2 * np.pi)
-            t1 = frame.d1 @ h.rotation
-            t2 = frame.d2 @ h.rotation
+            t1 = times(frame.d1, h.rotation)
+            t2 = times(frame.d2, h.rotation)
             directions = fan(t1, t2, angle, start)
             outcomes = [outcome(models[g.model], g, line, directions, step=spacing, points=points, spacing=spacing)
                         for g in poses]
@@ -333,7 +334,7 @@ def _best_line(session, leading: list, weights: np.ndarray, *, radius: float, an
             if len(leading) == 1 and not hits.any():      # a touch to confirm a pose must meet its surface
                 continue
             # the truths: the poses with an outcome, each model keeping its probability
-            truth = p * takes / (by_model @ (by_model[takes].sum(axis=0) / by_model.sum(axis=0)))
+            truth = p * takes / np.sum(by_model * (by_model[takes].sum(axis=0) / by_model.sum(axis=0)), axis=1)
             z = np.zeros((len(poses), len(leading)))                    # (truth pose, model fitted)
             missing = np.array([o.seen is Seen.MISS for o in outcomes])
             if missing.any():                # a truth that meets nothing: each model by its pose the line cuts least

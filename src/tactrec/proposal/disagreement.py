@@ -26,7 +26,7 @@ import dataclasses
 
 import numpy as np
 
-from ..linalg import solve_spd
+from ..linalg import dot3, norm3, solve_spd, times
 from .gain import model_points, pose_jacobian
 from .predict import to_model, to_world
 
@@ -77,12 +77,12 @@ def places(models: dict, h, pose, H0, rivals: list, contacts: np.ndarray, side: 
     if not frames:
         return []
     x_model = np.array([f.point for f in frames])
-    normals = np.array([f.normal for f in frames]) @ pose[:, :3]                      # model -> world directions
+    normals = times(np.array([f.normal for f in frames]), pose[:, :3])                # model -> world directions
     normals = normals / np.linalg.norm(normals, axis=1, keepdims=True)
     x = to_world(h, x_model)
     # the half-space the touches came from, wider as they come from more sides (the mean of their
     # normals shorter): at its edge a face at right angles is on the side up to the poses' tilt
-    ok = normals @ side >= -(1.0 - min(float(np.linalg.norm(side)), 1.0)) - TILT
+    ok = dot3(normals, side) >= -(1.0 - min(float(norm3(side)), 1.0)) - TILT
     if radius is not None:
         ok &= np.min(np.linalg.norm(x[:, None, :] - contacts[None, :, :], axis=2), axis=1) <= radius
     index = np.nonzero(ok)[0]
@@ -108,6 +108,6 @@ def touched_side(model, h, contacts: np.ndarray) -> np.ndarray:
     """The side the earlier touches came from: the mean of their outward unit normals under ``h``,
     world frame (unit for touches from one direction, shorter as they come from more)."""
     _, n = model.planes(to_model(h, contacts))
-    n = np.asarray(n, dtype=np.float64) @ h.rotation
+    n = times(n, h.rotation)
     n = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
     return np.nan_to_num(n).mean(axis=0)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..io.session import MissedLine
+from ..linalg import dot3, norm3, times
 from .predict import to_model
 
 __all__ = ["locate", "tried", "fan"]
@@ -31,7 +32,7 @@ def locate(session, leading: list, *, standoff: float, angle: float):
     vote, agree = np.zeros(len(order)), []
     for g in leading:
         _, n = models[g.model].planes(to_model(g, x[order]))
-        dots = np.einsum("ij,ij->i", np.asarray(n) @ g.rotation, outward)
+        dots = dot3(times(n, g.rotation), outward)
         vote += probs.get(g.model, 0.0) * np.sign(np.nan_to_num(dots))
         agree.append(dots)
     side = np.where(known[order] | (vote >= 0.0), 1.0, -1.0)         # a touch's own outward side stands
@@ -52,10 +53,10 @@ def locate(session, leading: list, *, standoff: float, angle: float):
     k = int(np.argmax(~inside))                      # the farthest point whose line starts outside it
     p, normal = x[order[k]], outward[k]
     away = p - contacts[np.argmin(gap[order[k]])]              # from the nearest contact, in the tangent plane
-    away = away - (away @ normal) * normal
-    if np.linalg.norm(away) <= 1e-12 * max(standoff, 1.0):
+    away = away - dot3(away, normal) * normal
+    if norm3(away) <= 1e-12 * max(standoff, 1.0):
         away = np.cross(normal, np.eye(3)[np.argmin(np.abs(normal))])
-    t1 = away / np.linalg.norm(away)
+    t1 = away / norm3(away)
     return p, normal, fan(t1, np.cross(normal, t1), angle), MissedLine(starts[k], -normal, 2.0 * standoff)
 
 
@@ -67,9 +68,9 @@ def tried(misses: list, points: np.ndarray, directions: np.ndarray) -> np.ndarra
     for line in misses:
         d = np.asarray(line.direction, dtype=np.float64)
         off = points - np.asarray(line.start, dtype=np.float64)
-        along = np.clip(off @ d, 0.0, line.length)
+        along = np.clip(dot3(off, d), 0.0, line.length)
         near = np.linalg.norm(off - along[:, None] * d, axis=1) <= 1e-3 * line.length
-        out |= near & (directions @ d <= -0.999)
+        out |= near & (dot3(directions, d) <= -0.999)
     return out
 
 

@@ -8,6 +8,7 @@ import enum
 
 import numpy as np
 
+from ..linalg import times
 from ..missed import crossing
 
 __all__ = ["KEPT", "Seen", "Prediction", "to_world", "to_model", "predicted", "outcome"]
@@ -43,11 +44,11 @@ KEPT = 0.25
 
 def to_world(h, x_model: np.ndarray) -> np.ndarray:
     """Model points ``(..., 3)`` into the world under hypothesis ``h`` (``model = s R world + t``)."""
-    return ((x_model - h.translation) @ h.rotation) / h.scale
+    return times(x_model - h.translation, h.rotation) / h.scale
 
 
 def to_model(h, x_world: np.ndarray) -> np.ndarray:
-    return h.scale * (x_world @ h.rotation.T) + h.translation
+    return h.scale * times(x_world, h.rotation.T) + h.translation
 
 
 def predicted(model, h, contact_w: np.ndarray, directions_w: np.ndarray, *, points: int, spacing: float):
@@ -62,8 +63,8 @@ def predicted(model, h, contact_w: np.ndarray, directions_w: np.ndarray, *, poin
     touches' scale this is their plane section to well within the noise, at the cost of one batch
     of closest-point queries (a plane section of a mesh costs a pass over all its faces)."""
     R, t, s = h.rotation, h.translation, h.scale
-    c = s * (np.asarray(contact_w, dtype=np.float64) @ R.T) + t
-    d = np.asarray(directions_w, dtype=np.float64) @ R.T
+    c = s * times(contact_w, R.T) + t
+    d = times(directions_w, R.T)
     d = d / np.linalg.norm(d, axis=1, keepdims=True)
     offsets = (np.arange(points) - (points - 1) / 2.0) * spacing * s
     x = model.projected((c[None, None, :] + offsets[None, :, None] * d[:, None, :]).reshape(-1, 3))
@@ -74,7 +75,7 @@ def predicted(model, h, contact_w: np.ndarray, directions_w: np.ndarray, *, poin
     kept[:, :centre] = np.cumprod(advancing[:, :centre][:, ::-1], axis=1)[:, ::-1].astype(bool)
     if not np.all(kept.sum(axis=1) >= KEPT * points):
         return None
-    return ((x - t) @ R) / s, kept.reshape(-1)
+    return times(x - t, R) / s, kept.reshape(-1)
 
 
 def outcome(model, pose, line, directions, *, step: float, points: int, spacing: float) -> Prediction:

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..linalg import gram
+from ..linalg import compose, dot3, eigh, gram, norm3, rotate, times
 from ..registration.step import jacobian
 from .fit import joint_model, per_touch, refine
 
@@ -32,25 +32,25 @@ def free_poses(touches, model, best, use: np.ndarray, x: np.ndarray) -> np.ndarr
     and kept if every touch used is still consistent with it (see :func:`distinct`)."""
     from ..registration.result import rotations_from_vectors
 
-    moved = x @ best.rotation.T + best.translation
+    moved = times(x, best.rotation.T) + best.translation
     n = model.planes(moved)[1]
-    values, vectors = np.linalg.eigh(gram(jacobian(moved, n)[None])[0])              # J^T J (6, 6)
+    values, vectors = eigh(gram(jacobian(moved, n)[None])[0])                         # J^T J (6, 6)
     centre = moved.mean(axis=0)
     R, t = [], []
     for k in np.nonzero(values < FREE * values[-1])[0]:
         w, u = vectors[:3, k], vectors[3:, k]
-        step = np.linalg.norm(np.cross(w, centre) + u)          # the data centre's speed
+        step = norm3(np.cross(w, centre) + u)                   # the data centre's speed
         if step <= 0:
             continue
         # the screw the twist (w, u) generates: a turn about the axis through q, a slide along it
-        turning = np.linalg.norm(w) * model.size > 1e-6 * np.linalg.norm(u)
-        q = np.cross(w, u) / (w @ w) if turning else np.zeros(3)
-        slide = (w @ u) / (w @ w) * w if turning else u
+        turning = norm3(w) * model.size > 1e-6 * norm3(u)
+        q = np.cross(w, u) / dot3(w, w) if turning else np.zeros(3)
+        slide = dot3(w, u) / dot3(w, w) * w if turning else u
         for f in (-0.5, -0.25, 0.25, 0.5):
             a = f * model.size / step
             dR = rotations_from_vectors((a * w)[None])[0] if turning else np.eye(3)
-            R.append(dR @ best.rotation)
-            t.append(dR @ (best.translation - q) + q + a * slide)
+            R.append(compose(dR, best.rotation))
+            t.append(rotate(dR, best.translation - q) + q + a * slide)
     if not R:
         return distinct(touches, best, np.empty((0, 3, 3)), np.empty((0, 3)))
     points, tips = [f.points for f in touches.features], touches.tips
@@ -66,11 +66,11 @@ def distinct(touches, best, R: np.ndarray, t: np.ndarray) -> np.ndarray:
     contacts = np.array([f.geometry.contact for f in touches.features]) * best.scale
     reach = max(f.reach for f in touches.features) * best.scale
     kept = [np.concatenate([best.rotation, best.translation[:, None]], axis=1)]
-    where = [contacts @ best.rotation.T + best.translation]
+    where = [times(contacts, best.rotation.T) + best.translation]
     for Rk, tk in zip(R, t):
         if len(kept) >= FAMILY:
             break
-        x = contacts @ Rk.T + tk
+        x = times(contacts, Rk.T) + tk
         if all(np.max(np.linalg.norm(x - w, axis=1)) > APART * reach for w in where):
             kept.append(np.concatenate([Rk, tk[:, None]], axis=1))
             where.append(x)

@@ -8,6 +8,7 @@ import dataclasses
 import numpy as np
 
 from ..answer import Answer
+from ..linalg import rotate
 from ..probability import UNKNOWN_PRIOR, Evidence
 
 __all__ = ["Hypothesis", "SessionResult"]
@@ -50,7 +51,7 @@ class Hypothesis:
         contact) lies on the model under this pose."""
         out = {"model": self.model, "error": float(self.error)}
         if contact is not None:
-            out["location"] = (self.scale * self.rotation @ contact + self.translation).tolist()
+            out["location"] = (self.scale * rotate(self.rotation, contact) + self.translation).tolist()
         out.update(rotation=self.rotation.tolist(), translation=self.translation.tolist(),
                    per_touch_error=[float(e) for e in self.per_touch])
         if self.scale != 1.0:
