@@ -155,6 +155,7 @@ def _databases():
 def _sessions(recognizers: dict, dbs: dict, seed: int) -> dict:
     """The five sessions: each touch's result and ``next``'s proposal after it."""
     from ..io.session import MissedLine
+    from ..linalg import norm3, rotate
     from ..sensor import Imperfections
     from ..simulation import random_rigid_motion, sensor_to_world, simulate_touch
     from ..surfaces import BUILTIN_SETS
@@ -188,10 +189,10 @@ def _sessions(recognizers: dict, dbs: dict, seed: int) -> dict:
             steps.append({"result": _clean(result.to_json()), "next": _clean(proposal.to_json())})
             if miss and touches == 1:
                 Rw, tw = model2world
-                normal = Rw @ np.asarray(data.meta["truth"]["normal"])
-                contact = Rw @ np.asarray(data.meta["truth"]["contact"]) + tw
+                normal = rotate(Rw, np.asarray(data.meta["truth"]["normal"], dtype=np.float64))
+                contact = rotate(Rw, np.asarray(data.meta["truth"]["contact"], dtype=np.float64)) + tw
                 side = np.cross(normal, [1.0, 0.0, 0.0] if abs(normal[0]) < 0.9 else [0.0, 1.0, 0.0])
-                line = MissedLine(contact + 30.0 * normal + 20.0 * side / np.linalg.norm(side), -normal, 60.0)
+                line = MissedLine(contact + 30.0 * normal + 20.0 * side / norm3(side), -normal, 60.0)
                 steps.append({"missed": _clean(session.add_miss(line).to_json())})
         out[f"session-{k}-{entry.name}"] = steps
     return out
