@@ -39,7 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ..linalg import dot3, norm3
+from ..linalg import dot3, norm3, rotate
 from .base import SiteFrame, SurfaceModel, TableSamples
 from .closedform_sections import project_out, trace_sections, unit_vectors
 from .closedform_spec import Domain, parse_spec
@@ -217,7 +217,7 @@ class ClosedFormSurface(SurfaceModel):
         if self.symmetries is None:
             return None
         estimate = np.asarray(estimate, dtype=float)
-        images = np.asarray(truth, dtype=float) @ self.symmetries.transpose(0, 2, 1)
+        images = rotate(self.symmetries, np.asarray(truth, dtype=float))
         return float(np.min(np.linalg.norm(images - estimate, axis=-1)))
 
     def wrap(self, uv: np.ndarray) -> np.ndarray:

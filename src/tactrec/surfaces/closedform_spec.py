@@ -12,6 +12,7 @@ from typing import Callable
 
 import numpy as np
 
+from ..linalg import compose, norm3
 from .expressions import parse_expression
 
 __all__ = ["Domain", "Spec", "parse_spec", "compile_numpy", "symmetry_group", "DEFAULT_RESOLUTION"]
@@ -95,18 +96,18 @@ def symmetry_group(generators) -> np.ndarray | None:
         if not (isinstance(g, list) and len(g) == 4 and all(isinstance(x, (int, float)) for x in g)):
             raise ValueError(f"symmetry {g!r} must be [axis_x, axis_y, axis_z, degrees]")
         axis = np.array(g[:3], dtype=float)
-        if np.linalg.norm(axis) == 0:
+        if norm3(axis) == 0:
             raise ValueError(f"symmetry {g!r} has a zero axis")
         from scipy.spatial.transform import Rotation
 
-        gens.append(Rotation.from_rotvec(np.deg2rad(g[3]) * axis / np.linalg.norm(axis)).as_matrix())
+        gens.append(Rotation.from_rotvec(np.deg2rad(g[3]) * axis / norm3(axis)).as_matrix())
     group = [np.eye(3)]
     frontier = [np.eye(3)]
     while frontier:
         new = []
         for a in frontier:
             for b in gens:
-                c = b @ a
+                c = compose(b, a)
                 if not any(np.allclose(c, h, atol=1e-9) for h in group):
                     group.append(c)
                     new.append(c)

@@ -6,7 +6,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..linalg import gram, solve_spd
+from ..linalg import gram, norm3, solve_spd, times
 
 __all__ = ["quadric_curvatures", "paraboloid_curvatures", "tangents", "unit_rows", "CurvatureField",
            "curvature_field"]
@@ -120,11 +120,11 @@ def paraboloid_curvatures(center: np.ndarray, normal: np.ndarray, neighbours: np
     the origin (Monge patch, ``k = c'' . n``) are reduced by medians, ``k1``
     and ``k2`` separately.
     """
-    n = normal / np.linalg.norm(normal)
+    n = normal / norm3(normal)
     (t1,), (t2,) = tangents(n[None])
     rel = neighbours - center
     order = np.argsort(np.linalg.norm(rel, axis=1))
-    local = rel[order] @ np.stack([t1, t2, n]).T
+    local = times(rel[order], np.stack([t1, t2, n]).T)
     counts = [s for s in sorted(set(min(s, len(local)) for s in sizes)) if s >= 6]
     # a fit needs six independent monomials among its points
     counts = [s for s in counts

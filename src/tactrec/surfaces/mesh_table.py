@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..linalg import dot3
 from .base import TableSamples
 from .mesh_curvature import paraboloid_curvatures
 
@@ -40,7 +41,7 @@ def sample_vertices(model, *, theta: float = np.pi / 8, max_ring: int = 6, min_r
         while True:
             members = np.concatenate(levels[: ring + 1])
             faces = np.unique(vf[members].indices)
-            if ring <= min_ring or np.min(fn[faces] @ normals[v]) >= cos_theta:
+            if ring <= min_ring or np.min(dot3(fn[faces], normals[v])) >= cos_theta:
                 break
             ring -= 1
         if not marked[members].any():
