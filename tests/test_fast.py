@@ -453,17 +453,14 @@ def _in_a_process(kernel: str, paths) -> list[dict]:
 
 def test_the_same_answer_under_two_blas_kernels(small, tmp_path):
     """The same 24 touch files recognised under the Prescott and Haswell kernels of OpenBLAS:
-    the same best model on every touch not flagged ambiguous, and contacts within 0.1 mm."""
+    the same answers, ambiguous ones included, and the same contacts to the last bit."""
     paths = []
     for k, (_, touch) in enumerate(_small_touches(small, 6, noise=0.02, outward=False)):
         paths.append(tmp_path / f"touch-{k}.json")
         save_touch(touch, paths[-1])
     a, b = _in_a_process("Prescott", paths), _in_a_process("Haswell", paths)
     assert len(a) == len(b) == 24
-    for x, y in zip(a, b):
-        if not (x["ambiguous"] or y["ambiguous"]):
-            assert x["best"] == y["best"]
-            assert np.linalg.norm(np.subtract(x["location"], y["location"])) < 0.1
+    assert a == b
 
 
 def test_fast_vs_paper_bench_writes_its_table_and_plot(tmp_path):
