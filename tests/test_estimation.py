@@ -114,3 +114,24 @@ def test_mesh_sections_are_fitted_over_several_facets():
         touch = simulate_touch(m, [v], points=81, spacing=0.3, rng=v)
         geom = estimate(touch)
         assert abs(geom.k1 + 1 / 30) < 0.006 and abs(geom.k2 + 1 / 30) < 0.006, (v, geom.k1, geom.k2)
+
+
+def test_a_curves_fit_is_the_same_read_either_way():
+    """A curve's sampling plane and fit do not depend on the order its points come in: e1 runs
+    from the first point to the last (so it turns with them), and the tangent with it."""
+    from scipy.spatial.transform import Rotation
+
+    from tactrec.estimation import _sampling_plane, fit_curve
+
+    R = 20.0
+    s = np.linspace(-6.0, 6.0, 41)
+    flat = np.stack([R * np.sin(s / R), np.zeros_like(s), R * (1.0 - np.cos(s / R))], axis=1)  # in y = 0
+    arc = flat @ Rotation.from_rotvec([0.3, -0.5, 0.2]).as_matrix().T + [1.0, 2.0, 3.0]
+    for curve in (arc, arc[::-1]):
+        e1, e2, n = _sampling_plane(curve)
+        assert e1 @ (curve[-1] - curve[0]) > 0
+        assert np.allclose(np.cross(n, e1), e2) and np.max(np.abs((curve - curve[20]) @ n)) < 1e-9
+    a, b = fit_curve(arc, arc[20]), fit_curve(arc[::-1], arc[20])
+    assert np.allclose(a.tangent, -b.tangent, atol=1e-9)
+    assert np.allclose(a.principal_normal, b.principal_normal, atol=1e-9)
+    assert a.curvature == pytest.approx(b.curvature, rel=1e-9) and a.curvature == pytest.approx(1.0 / R, rel=5e-3)
