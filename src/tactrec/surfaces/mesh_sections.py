@@ -47,8 +47,6 @@ def resample_polyline(line: np.ndarray, anchor: np.ndarray, along: np.ndarray, o
     return np.stack([np.interp(targets, arc, line[:, i]) for i in range(3)], axis=1)
 
 
-
-
 def plane_section(vertices: np.ndarray, faces: np.ndarray, origin: np.ndarray, normal: np.ndarray):
     """The section of the mesh ``vertices, faces`` by the plane through ``origin`` with ``normal``: a
     trimesh ``Path3D``, or None where the plane misses the mesh.
