@@ -58,7 +58,7 @@ def _peak_mb() -> tuple[float, float]:
 
 def _outcome(rec, name: str, family) -> dict:
     ok = [r.model for r in rec.ranking if r.ok]
-    twin = (rec.best != name and family is not None and rec.best is not None and family(rec.best) == family(name))
+    twin = rec.best not in (None, name) and family(name) is not None and family(rec.best) == family(name)
     return {"model": name, "recognized": rec.best, "rank": ok.index(name) + 1 if name in ok else None,
             "twin": bool(twin), "seconds": rec.seconds, "ambiguous": rec.ambiguous, "settled": rec.settled}
 
