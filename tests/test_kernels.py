@@ -15,8 +15,8 @@ import sys
 SCRIPT = r"""
 import json
 import numpy as np
-from tactrec.bench.answers import HARD, P3, _clean, _scan_touch
-from tactrec.bench.common import instance_rng
+from tactrec.bench.answers import HARD, P3, without_timings as clean
+from tactrec.bench.common import random_face_site, random_site_touch
 from tactrec.database import build_entries
 from tactrec.recognition import Recognizer
 from tactrec.sensor import Imperfections
@@ -27,48 +27,37 @@ closed = build_entries(["ellipsoid", "monkey-saddle"]).entries
 out = {}
 
 
-def spoilt(model, imperfections, rng):
-    for _ in range(100):
-        face = int(rng.integers(len(model.faces)))
-        b = rng.dirichlet(np.ones(3))
-        try:
-            return simulate_touch(model, [face, float(b[1]), float(b[2])], imperfections=imperfections, rng=rng,
-                                  **dict(P3, outward=False))
-        except ValueError:
-            continue
-
-
 with Recognizer(scans, workers=1) as rec:
     for k, e in enumerate(scans):
         for protocol, spec in (("p3", P3), ("hard", HARD)):
-            touch = _scan_touch(e.model, np.random.default_rng([k, protocol == "hard"]), spec, protocol == "p3")
-            out[f"{protocol}-{e.name}"] = [_clean(touch.curves), _clean(rec.recognize(touch).to_json())]
+            touch = random_site_touch(e.model, np.random.default_rng([k, protocol == "hard"]), spec,
+                                      vertex=protocol == "p3")
+            out[f"{protocol}-{e.name}"] = [clean(touch.curves), clean(rec.recognize(touch).to_json())]
     for k, (label, imperfections) in enumerate((("tip", Imperfections(tip_radius=1.0)),
                                                  ("outliers", Imperfections(outliers=0.04)))):
-        touch = spoilt(scans[k].model, imperfections, np.random.default_rng([7, k]))
-        out[f"{label}-{scans[k].name}"] = [_clean(touch.curves), _clean(rec.recognize(touch).to_json())]
+        touch = random_site_touch(scans[k].model, np.random.default_rng([7, k]), dict(P3, outward=False),
+                                  imperfections=imperfections)
+        out[f"{label}-{scans[k].name}"] = [clean(touch.curves), clean(rec.recognize(touch).to_json())]
     model = scans[1].model
     rng = np.random.default_rng(11)
     model2world = random_rigid_motion(rng, extent=200.0)
     session, steps = rec.session(), []
     while len(steps) < 2:
-        face = int(rng.integers(len(model.faces)))
-        b = rng.dirichlet(np.ones(3))
         try:
-            touch = simulate_touch(model, [face, float(b[1]), float(b[2])], rng=rng, **HARD)
+            touch = simulate_touch(model, random_face_site(model, rng), rng=rng, **HARD)
         except ValueError:
             continue
         result = session.add(touch, sensor_to_world(touch, model2world))
         proposal = session.next(radius=40.0, angle=30.0, rng=len(steps))
-        steps.append([_clean(result.to_json()), _clean(proposal.to_json())])
+        steps.append([clean(result.to_json()), clean(proposal.to_json())])
     out["session-mug"] = steps
 with Recognizer(scans, workers=1, method="paper") as rec:
-    touch = _scan_touch(scans[0].model, np.random.default_rng(5), P3, True)
-    out["paper-banana"] = _clean(rec.recognize(touch).to_json())
+    touch = random_site_touch(scans[0].model, np.random.default_rng(5), P3, vertex=True)
+    out["paper-banana"] = clean(rec.recognize(touch).to_json())
 with Recognizer(closed, workers=1) as rec:
     touch = simulate_random_touch(closed[0].model, spacing=0.02, points=41, noise=0.001,
                                   rng=np.random.default_rng(3))
-    out["closed-form-ellipsoid"] = [_clean(touch.curves), _clean(rec.recognize(touch).to_json())]
+    out["closed-form-ellipsoid"] = [clean(touch.curves), clean(rec.recognize(touch).to_json())]
 print(json.dumps(out, sort_keys=True, allow_nan=True))
 """
 

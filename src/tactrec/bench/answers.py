@@ -37,9 +37,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .common import instance_rng, write_json
+from .common import instance_rng, random_face_site, random_site_touch, write_json
 
-__all__ = ["run", "compare", "digest"]
+__all__ = ["run", "compare", "digest", "without_timings", "P3", "HARD"]
 
 SPACING = 0.3
 P3 = dict(points=81, spacing=SPACING, angle=60.0, noise=0.0, outward=True)
@@ -48,39 +48,22 @@ HARD = dict(points=41, spacing=SPACING, angle=30.0, noise=0.05, noise_kind="gaus
 TIMINGS = ("seconds", "stages", "own_seconds")
 
 
-def _clean(value):
+def without_timings(value):
     """``value`` (a result's JSON) without its timings, numbers as JSON writes them."""
     if isinstance(value, dict):
-        return {k: _clean(v) for k, v in value.items() if k not in TIMINGS}
+        return {k: without_timings(v) for k, v in value.items() if k not in TIMINGS}
     if isinstance(value, (list, tuple)):
-        return [_clean(v) for v in value]
+        return [without_timings(v) for v in value]
     if isinstance(value, np.generic):
         return value.item()
     if isinstance(value, np.ndarray):
-        return _clean(value.tolist())
+        return without_timings(value.tolist())
     return value
 
 
 def digest(value) -> str:
     """SHA-256 of ``value``'s canonical JSON (sorted keys, full precision)."""
     return hashlib.sha256(json.dumps(value, sort_keys=True, allow_nan=True).encode()).hexdigest()
-
-
-def _scan_touch(model, rng, spec: dict, vertex: bool):
-    from ..simulation import simulate_touch
-
-    for _ in range(100):
-        if vertex:
-            site = [int(rng.integers(len(model.vertices)))]
-        else:
-            face = int(rng.integers(len(model.faces)))
-            b = rng.dirichlet(np.ones(3))
-            site = [face, float(b[1]), float(b[2])]
-        try:
-            return simulate_touch(model, site, rng=rng, **spec)
-        except ValueError:
-            continue
-    raise RuntimeError(f"no place of {model.name} takes the touch")
 
 
 def _recognitions(seed: int):
@@ -111,13 +94,14 @@ def _recognitions(seed: int):
 
 
 def _touch(spec, entries: dict, seed: int):
-    from ..simulation import simulate_random_touch, simulate_touch
+    from ..simulation import simulate_random_touch
 
     kind = spec[0]
     if kind == "scan":
         _, name, protocol, k = spec
         rng = instance_rng(seed, 1, k, 0 if protocol == "p3" else 1)
-        return _scan_touch(entries["builtin"][name].model, rng, P3 if protocol == "p3" else HARD, protocol == "p3")
+        return random_site_touch(entries["builtin"][name].model, rng, P3 if protocol == "p3" else HARD,
+                                 vertex=protocol == "p3")
     if kind == "closed":
         _, name, k = spec
         return simulate_random_touch(entries["table1"][name].model, spacing=0.02, points=41, noise=0.001,
@@ -125,19 +109,10 @@ def _touch(spec, entries: dict, seed: int):
     if kind == "cad":
         (_, k), models = spec, list(entries["cad"].values())
         rng = instance_rng(seed, 3, k)
-        return _scan_touch(models[(3 * k) % len(models)].model, rng, P3, True)
+        return random_site_touch(models[(3 * k) % len(models)].model, rng, P3, vertex=True)
     _, name, imperfections, k = spec
     model = entries["builtin"][name].model
-    rng = instance_rng(seed, 4, k)
-    for _ in range(100):
-        face = int(rng.integers(len(model.faces)))
-        b = rng.dirichlet(np.ones(3))
-        try:
-            return simulate_touch(model, [face, float(b[1]), float(b[2])], imperfections=imperfections, rng=rng,
-                                  **dict(P3, outward=False))
-        except ValueError:
-            continue
-    raise RuntimeError(f"no place of {name} takes the touch")
+    return random_site_touch(model, instance_rng(seed, 4, k), dict(P3, outward=False), imperfections=imperfections)
 
 
 def _databases():
@@ -176,24 +151,21 @@ def _sessions(recognizers: dict, dbs: dict, seed: int) -> dict:
         for _ in range(60):
             if touches >= 3:
                 break
-            face = int(rng.integers(len(model.faces)))
-            b = rng.dirichlet(np.ones(3))
             try:
-                data = simulate_touch(model, [face, float(b[1]), float(b[2])], imperfections=imperfections, rng=rng,
-                                      **HARD)
+                data = simulate_touch(model, random_face_site(model, rng), imperfections=imperfections, rng=rng, **HARD)
             except ValueError:
                 continue
             result = session.add(data, sensor_to_world(data, model2world))
             touches += 1
             proposal = session.next(radius=40.0, angle=30.0, rng=instance_rng(seed, 6, k, touches))
-            steps.append({"result": _clean(result.to_json()), "next": _clean(proposal.to_json())})
+            steps.append({"result": without_timings(result.to_json()), "next": without_timings(proposal.to_json())})
             if miss and touches == 1:
                 Rw, tw = model2world
                 normal = rotate(Rw, np.asarray(data.meta["truth"]["normal"], dtype=np.float64))
                 contact = rotate(Rw, np.asarray(data.meta["truth"]["contact"], dtype=np.float64)) + tw
                 side = np.cross(normal, [1.0, 0.0, 0.0] if abs(normal[0]) < 0.9 else [0.0, 1.0, 0.0])
                 line = MissedLine(contact + 30.0 * normal + 20.0 * side / norm3(side), -normal, 60.0)
-                steps.append({"missed": _clean(session.add_miss(line).to_json())})
+                steps.append({"missed": without_timings(session.add_miss(line).to_json())})
         out[f"session-{k}-{entry.name}"] = steps
     return out
 
@@ -225,7 +197,7 @@ def run(*, out, instances: int = 1, seed: int = 0, jobs: int | None = None, quie
                 rec = budgeted[key].recognize(touch)
             else:
                 rec = recognizers[db].recognize(touch)
-            answers[name] = _clean(rec.to_json())
+            answers[name] = without_timings(rec.to_json())
         for r in budgeted.values():
             r.close()
         answers.update(_sessions(recognizers, dbs, seed))

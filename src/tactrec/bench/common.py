@@ -20,7 +20,7 @@ import numpy as np
 
 from ..io.atomic import write_text_atomic
 
-__all__ = ["spread", "paper_values", "instance_rng", "random_face_site", "run_parallel", "write_json", "default_jobs",
+__all__ = ["spread", "paper_values", "instance_rng", "random_face_site", "random_site_touch", "run_parallel", "write_json", "default_jobs",
            "sources_hash", "saved_record", "recognizer", "CORE_SOURCES", "errors_on_every_model", "error_cell", "SCANS",
            "scan_database", "within_noise", "PROTOCOLS", "SPACING", "database", "simulate", "scan_set", "ycb_database",
            "vertex_touch"]
@@ -198,6 +198,21 @@ def random_face_site(model, rng) -> list:
     face = int(rng.integers(len(model.faces)))
     b = rng.dirichlet(np.ones(3))
     return [face, float(b[1]), float(b[2])]
+
+
+def random_site_touch(model, rng, spec: dict, *, vertex: bool = False, imperfections=None):
+    """A touch of mesh ``model`` (:func:`tactrec.simulation.simulate_touch` with the options ``spec``)
+    at a random vertex (``vertex``) or :func:`random_face_site`, drawn again until one takes it (at most
+    100 draws)."""
+    from ..simulation import simulate_touch
+
+    for _ in range(100):
+        site = [int(rng.integers(len(model.vertices)))] if vertex else random_face_site(model, rng)
+        try:
+            return simulate_touch(model, site, imperfections=imperfections, rng=rng, **spec)
+        except ValueError:
+            continue
+    raise RuntimeError(f"no place of {model.name} takes the touch")
 
 
 def default_jobs() -> int:
