@@ -14,6 +14,7 @@ used).  Every file is written atomically.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import hashlib
 import io
@@ -317,21 +318,23 @@ def build_database(models: Iterable, out: str | os.PathLike, *, quiet: bool = Fa
     # each model is written as soon as it is built, and the index of those done every INDEX_EVERY
     # seconds: a stopped build of a large catalogue resumes where it stopped
     written = time.monotonic()
-    for done, (k, blob, rows) in enumerate(_stored(models, todo, quiet=quiet, tips=tips), 1):
-        src, model, sha, options, _, _ = plans[k]
-        name = f"{_safe(model.name)}-{sha[:16]}.npz"
-        with atomic_write(out / name, "wb") as handle:
-            handle.write(blob)
-        items[k] = {
-            "name": model.name, "kind": model.kind, "units": model.units, "options": options, "file": name,
-            "source": str(src.path), "source_sha256": sha, "file_sha256": hashlib.sha256(blob).hexdigest(),
-            "table_rows": rows, "table_version": TABLE_VERSION, "store_version": STORE_VERSION,
-            "builtin": src.builtin,
-        }
-        built.append(model.name)
-        if done < len(todo) and time.monotonic() - written > INDEX_EVERY:
-            _write_index(out, [items[j] for j in sorted(items)], complete=False)
-            written = time.monotonic()
+    # closed at once where a write fails, which ends its workers
+    with contextlib.closing(_stored(models, todo, quiet=quiet, tips=tips)) as stored:
+        for done, (k, blob, rows) in enumerate(stored, 1):
+            src, model, sha, options, _, _ = plans[k]
+            name = f"{_safe(model.name)}-{sha[:16]}.npz"
+            with atomic_write(out / name, "wb") as handle:
+                handle.write(blob)
+            items[k] = {
+                "name": model.name, "kind": model.kind, "units": model.units, "options": options, "file": name,
+                "source": str(src.path), "source_sha256": sha, "file_sha256": hashlib.sha256(blob).hexdigest(),
+                "table_rows": rows, "table_version": TABLE_VERSION, "store_version": STORE_VERSION,
+                "builtin": src.builtin,
+            }
+            built.append(model.name)
+            if done < len(todo) and time.monotonic() - written > INDEX_EVERY:
+                _write_index(out, [items[j] for j in sorted(items)], complete=False)
+                written = time.monotonic()
     items = [items[k] for k in range(len(plans))]
     _write_index(out, items, complete=True)
     keep = {item["file"] for item in items}
