@@ -42,8 +42,9 @@ VERSION = 3            # 2: meshes store their fitted normals; 3: and their dist
 #: bump when table construction changes, so that old tables are rebuilt
 TABLE_VERSION = 2
 #: bump when what a model stores besides its table changes, so that a build redoes it (a database
-#: of an older one still loads: what it lacks is made on first use); 2: a mesh's outer field
-STORE_VERSION = 2
+#: of an older one still loads: what it lacks is made on first use); 2: a mesh's outer field; 3: its
+#: places' rings (the index of places: :mod:`tactrec.index`)
+STORE_VERSION = 3
 #: seconds between two writes of the index while a build is under way
 INDEX_EVERY = 10.0
 

@@ -26,9 +26,10 @@ from pathlib import Path
 
 import numpy as np
 
+from ..methods.fast_config import FastConfig
 from .common import instance_rng, vertex_touch, write_json
 
-__all__ = ["run", "SIZES", "GENERATED", "catalogue_entries"]
+__all__ = ["run", "SIZES", "GENERATED", "catalogue_entries", "place_rank"]
 
 #: catalogue sizes: the 78 scans, with the first 172 generated meshes, with all 1,000
 SIZES = (78, 250, 1078)
@@ -56,11 +57,31 @@ def _peak_mb() -> tuple[float, float]:
     return own, children
 
 
-def _outcome(rec, name: str, family) -> dict:
+def place_rank(index, touch, size: int, k: int, model, vertex: int) -> int | None:
+    """Where the index of places (:class:`~tactrec.index.PlaceIndex`) ranks the true place of a touch
+    of model ``k`` at ``vertex`` among the places of the first ``size`` models: the first of model
+    ``k``'s places within a cell and a half of the vertex whose normal lies within 37 degrees of its
+    (1 = first); None where no such place is ranked."""
+    from ..surfaces.mesh_rings import CELL_MM
+    from ..units import conversion
+
+    ranked = index.ranked(touch, range(size), len(index))
+    rows = np.flatnonzero(ranked.model == k)
+    place = ranked.vertex[rows]
+    near = np.linalg.norm(model.vertices[place] - model.vertices[vertex], axis=1) <= \
+        1.5 * CELL_MM * conversion("mm", model.units)
+    normal = model.fine_curvatures.normal
+    facing = np.sum(normal[place] * normal[vertex], axis=1) > 0.8
+    hits = rows[near & facing]
+    return int(hits[0]) + 1 if len(hits) else None
+
+
+def _outcome(rec, name: str, family, place: int | None) -> dict:
     ok = [r.model for r in rec.ranking if r.ok]
     twin = rec.best not in (None, name) and family(name) is not None and family(rec.best) == family(name)
     return {"model": name, "recognized": rec.best, "rank": ok.index(name) + 1 if name in ok else None,
-            "twin": bool(twin), "seconds": rec.seconds, "ambiguous": rec.ambiguous, "settled": rec.settled}
+            "twin": bool(twin), "seconds": rec.seconds, "ambiguous": rec.ambiguous, "settled": rec.settled,
+            "place_rank": place}
 
 
 def _summary(rows: list[dict]) -> dict:
@@ -68,17 +89,21 @@ def _summary(rows: list[dict]) -> dict:
         return {}
     ranks = [r["rank"] for r in rows]
     seconds = [r["seconds"] for r in rows]
+    places = np.array([np.inf if r["place_rank"] is None else r["place_rank"] for r in rows])
     return {"touches": len(rows), "top1_percent": 100.0 * np.mean([k == 1 for k in ranks]),
             "top3_percent": 100.0 * np.mean([k is not None and k <= 3 for k in ranks]),
             "twin_confusions": int(sum(r["twin"] for r in rows)),
             "ambiguous": int(sum(r["ambiguous"] for r in rows)),
             "unsettled": int(sum(not r["settled"] for r in rows)),
             "median_seconds": float(np.median(seconds)), "p95_seconds": float(np.percentile(seconds, 95)),
-            "max_seconds": float(np.max(seconds))}
+            "max_seconds": float(np.max(seconds)),
+            "place_rank_median": float(np.median(places)), "place_rank_p90": float(np.percentile(places, 90)),
+            "place_in_first_round_percent": 100.0 * float(np.mean(places <= FastConfig.index_round))}
 
 
 def run(*, out, instances: int = 20, seed: int = 0, jobs: int | None = None, quiet: bool = False,
         **_ignored) -> dict:
+    from ..features import Touch
     from ..recognition import Recognizer, default_workers
     from .catalogue import family_of
     from .common import ycb_database
@@ -91,12 +116,16 @@ def run(*, out, instances: int = 20, seed: int = 0, jobs: int | None = None, qui
     on_scans = [int(i) for i in rng.choice(len(scans), size=min(instances, len(scans)), replace=False)]
     on_generated = [len(scans) + int(i) for i in rng.choice(len(generated), size=min(instances, len(generated)),
                                                              replace=False)]
-    touches = {k: vertex_touch(entries[k], k, 0, seed)[1] for k in on_scans + on_generated}
+    touches = {k: vertex_touch(entries[k], k, 0, seed) for k in on_scans + on_generated}
     table = {"benchmark": "scale-out", "seed": seed, "instances": instances, "sizes": {}}
     for size in SIZES:
         chosen = [k for k in on_scans + on_generated if k < size]
         with Recognizer(entries[:size], workers=default_workers()) as recognizer:
-            rows = [_outcome(recognizer.recognize(touches[k]), entries[k].name, family_of) for k in chosen]
+            rows = []
+            for k in chosen:
+                vertex, data = touches[k]
+                place = place_rank(recognizer.index, Touch.from_data(data), size, k, entries[k].model, vertex)
+                rows.append(_outcome(recognizer.recognize(data), entries[k].name, family_of, place))
         own, worker = _peak_mb()
         table["sizes"][str(size)] = {
             "all": _summary(rows), "scans": _summary([r for r, k in zip(rows, chosen) if k < len(scans)]),
@@ -107,12 +136,14 @@ def run(*, out, instances: int = 20, seed: int = 0, jobs: int | None = None, qui
     lines = [f"P3 touches (seed {seed}): {instances} on YCB scans, {instances} on generated meshes, one process "
              "and its two workers per catalogue size", "",
              "| models | touches | top-1 | top-3 | near-twin confusions | median s | p95 s | max s | "
-             "same scan touches: median s | peak MB (process / worker) |", "|---|---|---|---|---|---|---|---|---|---|"]
+             "same scan touches: median s | true place's rank in the index: median / p90 / in the first round | "
+             "peak MB (process / worker) |", "|---|---|---|---|---|---|---|---|---|---|---|"]
     for size, s in table["sizes"].items():
         a, y, m = s["all"], s["scans"], s["peak_mb"]
         lines.append(f"| {size} | {a['touches']} | {a['top1_percent']:.1f}% | {a['top3_percent']:.1f}% | "
                      f"{a['twin_confusions']} | {a['median_seconds']:.2f} | {a['p95_seconds']:.2f} | "
-                     f"{a['max_seconds']:.2f} | {y['median_seconds']:.2f} | {m['process']:.0f} / "
+                     f"{a['max_seconds']:.2f} | {y['median_seconds']:.2f} | {a['place_rank_median']:.0f} / "
+                     f"{a['place_rank_p90']:.0f} / {a['place_in_first_round_percent']:.0f}% | {m['process']:.0f} / "
                      f"{m['largest_worker']:.0f} |")
     table["text"] = "\n".join(lines)
     (out / "scale-out.md").write_text(table["text"] + "\n", encoding="utf-8")

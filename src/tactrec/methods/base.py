@@ -99,16 +99,20 @@ class Method(Protocol):
     #: whether :meth:`search` runs the compiled kernels of :mod:`tactrec.engine` (loaded ahead by a
     #: one-off command: :func:`tactrec.engine.preload`)
     uses_engine: ClassVar[bool]
+    #: whether its search ranks places by the catalogue's index of places (:mod:`tactrec.index`),
+    #: which the recognizer then builds once
+    uses_index: ClassVar[bool]
 
     def configure(self, **options) -> Config: ...
 
     def prepare(self, model) -> None: ...
 
     def search(self, touch, models: Sequence, config: Config, runner: Runner, *,
-               among: Sequence[int] | None = None, budget: int | None = None) -> SearchOutcome:
+               among: Sequence[int] | None = None, budget: int | None = None, index=None) -> SearchOutcome:
         """One registration per model of ``models``; only those at the indices ``among`` are searched
         (all when None), the others are rejected as not searched.  ``budget``: at most this much work
-        in all, when lower than the method's own budget (a method without a budget ignores it)."""
+        in all, when lower than the method's own budget (a method without a budget ignores it).
+        ``index``: the models' :class:`~tactrec.index.PlaceIndex`, for a method that :attr:`uses_index`."""
         ...
 
     def refit(self, touch, models: Sequence, config: Config, runner: Runner,

@@ -2,9 +2,13 @@
 
 The hypotheses are (model, place, rotation about the normal, tilt of the
 normal, sign of the normal).  The search takes them in *tiers*
-(:data:`TIERS`), each a step coarse to fine: the best 500 places by
-curvature at every rotation, screened on the model's distance field
-(:mod:`tactrec.engine.screen`); for a touch whose normals disagree across
+(:data:`TIERS`), each a step coarse to fine: the catalogue's best 500
+places a model by the index of places (:mod:`tactrec.index`: the rings of
+the surface about each place, read as a touch reads them), at every
+rotation, screened on their models' distance fields
+(:mod:`tactrec.engine.screen`) in rounds, best first
+(:mod:`.fast_index`), or each model's best 500 by curvature for a touch
+whose curves reach no ring; for a touch whose normals disagree across
 scales (:attr:`tactrec.features.Touch.scales`: it lies on a sharp, thin or
 folded place, where no fit reads the curvature), the best 500 *folded*
 places, cells whose normals lie more than ``tilt_step`` degrees apart; the
@@ -179,6 +183,7 @@ class FastMethod:
     name = "fast"
     scores_context = True
     uses_engine = True
+    uses_index = True
     Config = FastConfig
 
     def configure(self, **options) -> FastConfig:
@@ -188,7 +193,8 @@ class FastMethod:
         if model.kind == "mesh":
             mesh_fast.prepare(model)
 
-    def search(self, touch, models, config: FastConfig, runner, *, among=None, budget=None) -> SearchOutcome:
+    def search(self, touch, models, config: FastConfig, runner, *, among=None, budget=None,
+               index=None) -> SearchOutcome:
         chosen = range(len(models)) if among is None else sorted(among)
         meshes = [i for i in chosen if models[i].model.kind == "mesh"]
         others = [i for i in chosen if models[i].model.kind != "mesh"]
@@ -208,6 +214,12 @@ class FastMethod:
         def room(spent: int) -> int:                # the grids' own allowance, as much as the tiers'
             return int((allowed - spent * share) // hop)
 
+        indexed = None                              # the indexed tier's rounds, where the index reads the touch
+        if index is not None and meshes and any(t.indexed for t in config.tiers) and index.reads(touch):
+            from .fast_index import IndexedTier
+
+            indexed = IndexedTier(index, touch, meshes, config, next(k for k, t in enumerate(config.tiers) if t.indexed))
+
         while True:
             if fine:                                # the fit test steers: the leader's stall is searched about first
                 grids += grid_leaders(state, meshes, runner, room, grids, 1)
@@ -215,6 +227,8 @@ class FastMethod:
                 settled = True
                 break
             group = state.contending()
+            if indexed is not None:                 # the indexed tier runs through the catalogue first
+                group = [i for i in state.waiting() if state.next[i] == indexed.k] or group
             if not group:
                 settled = True                              # every tier has run on every model
                 break
@@ -222,6 +236,22 @@ class FastMethod:
             group = [i for i in group if state.next[i] == k]
             if config.tiers[k].folded and touch.scales.agree:     # no folded place to search first
                 state.next.update((i, k + 1) for i in group)
+                continue
+            if indexed is not None and k == indexed.k:
+                finished = [i for i in group if not indexed.left(i)]
+                state.next.update((i, k + 1) for i in finished)          # a model without places in the ranking
+                group = [i for i in group if i not in finished]
+                if not group:
+                    continue
+                from .fast_index import round_cost
+
+                spots = indexed.next_round(group)
+                cost = round_cost(config, spots, len(touch.curves), len(touch.context))
+                if work > 0 and work * share + cost + polish > allowed:
+                    break
+                depth = max(depth, k + 1)
+                work += self._tier(state, sorted(spots), k, runner, spots)
+                state.next.update((i, k) for i in spots if indexed.left(i))     # its next round, if it has one
                 continue
             cost = sum(tier_cost(config, k, signs, state.places(i, k), len(touch.curves), len(touch.context))
                        for i in group)
@@ -252,10 +282,16 @@ class FastMethod:
         return dataclasses.replace(outcome, ranking=ranking, work=int(outcome.work + work))
 
     @staticmethod
-    def _tier(state: State, group: list[int], k: int, runner) -> int:
-        """Tier ``k`` on the models of ``group``: cheap stage, selection, refinement.  Returns the work."""
+    def _tier(state: State, group: list[int], k: int, runner, spots=None) -> int:
+        """Tier ``k`` on the models of ``group`` (with ``spots``, a round of the indexed tier on its
+        places: :mod:`.fast_index`): cheap stage, selection, refinement.  Returns the work."""
         touch, config = state.touch, state.config
-        cheap = dict(zip(group, runner.map(cheap_stage, group, touch, config, k)))
+        if spots is None:
+            cheap = dict(zip(group, runner.map(cheap_stage, group, touch, config, k)))
+        else:
+            from .fast_index import indexed_stage
+
+            cheap = dict(zip(group, runner.map(indexed_stage, group, touch, config, k, items=[spots[i] for i in group])))
         work = sum(c.queries for c in cheap.values())
         posed = {i: c.poses for i, c in cheap.items() if c.outcome is Outcome.FITTED}
         for i, c in cheap.items():

@@ -28,12 +28,16 @@ class Tier:
     normal as estimated or also ``tilt`` degrees off four ways; or every place at every rotation,
     screened on the model's distance field (``"field"``: :mod:`tactrec.engine.screen`), with the
     data's normals or, for ``tilt > 0``, with normals tilted every ``tilt_step`` degrees out to
-    ``tilt`` (:func:`tactrec.engine.screen.tilted_normals`)."""
+    ``tilt`` (:func:`tactrec.engine.screen.tilted_normals`).  An ``indexed`` field tier takes the
+    catalogue's best ``places`` x models places by the index of places instead, in rounds
+    (:mod:`tactrec.methods.fast_index`), and each model's own best by curvature for a touch the
+    index cannot read."""
 
     places: int | None
     rotations: str = "frames"
     tilt: float = 0.0
     folded: bool = False
+    indexed: bool = False
 
     def __post_init__(self):
         if self.places is not None and (not isinstance(self.places, int) or self.places < 1):
@@ -44,13 +48,16 @@ class Tier:
             raise ValueError(f"a tier's tilt is in [0, 90) degrees, got {self.tilt!r}")
         if self.folded and self.rotations != "field":
             raise ValueError("a tier of folded places is a field tier")
+        if self.indexed and (self.rotations != "field" or self.folded or self.tilt > 0 or self.places is None):
+            raise ValueError("an indexed tier is an untilted field tier of a number of places a model")
 
 
-#: the default schedule, coarse to fine: the best 500 places by curvature screened on the field, the
+#: the default schedule, coarse to fine: the catalogue's best 500 places a model by the index of
+#: places (each model's best 500 by curvature for a touch the index cannot read) screened on the field, the
 #: best 500 folded places (for a touch whose normals disagree across scales), the 24 places whose
 #: curvature matches best posed by their frames, every place on the field, every place with the
 #: normal tilted out to 60 degrees
-TIERS = (Tier(500, "field"), Tier(500, "field", folded=True), Tier(24), Tier(None, "field"),
+TIERS = (Tier(500, "field", indexed=True), Tier(500, "field", folded=True), Tier(24), Tier(None, "field"),
          Tier(None, "field", 60.0))
 #: the exhaustive reference: every vertex, every 30 degrees
 EXHAUSTIVE = (Tier(None, "all"),)
@@ -126,6 +133,12 @@ class FastConfig(Config):
     screen_stages: ClassVar[tuple] = ((36, 2, 0.05), (72, 4, 1.0))
     #: hypotheses of a field screen that take the field steps
     screen_keep: ClassVar[int] = 96
+    #: places an indexed tier's first round screens (catalogue-wide; each later round twice as many):
+    #: the index's ranking puts the true place of most touches among the first few thousand
+    index_round: ClassVar[int] = 2048
+    #: in an indexed round, hypotheses a model keeps for the field steps per place it screens (at
+    #: most ``screen_keep``): a model with a few places in a round takes a few hypotheses, not 96
+    index_keep: ClassVar[int] = 4
     #: Gauss-Newton steps on the field of each hypothesis kept
     field_steps: ClassVar[int] = 6
     #: degrees between the tilted normals (and the directions of a cell's normals that make places

@@ -123,7 +123,7 @@ def tier_span(tiers, k: int) -> tuple[int, int | None]:
     """Which of the ranked places tier ``k`` adds: those past the deepest earlier tier of the same kind."""
     tier = tiers[k]
     start = max((t.places or 0 for t in tiers[:k]
-                 if (t.rotations, t.tilt, t.folded) == (tier.rotations, tier.tilt, tier.folded)),
+                 if (t.rotations, t.tilt, t.folded, t.indexed) == (tier.rotations, tier.tilt, tier.folded, tier.indexed)),
                 default=0)
     return start, tier.places
 
@@ -137,11 +137,12 @@ def field_stages(config: FastConfig, tier) -> tuple:
     return (turns, *config.screen_stages[0][1:]), (2 * turns, *config.screen_stages[-1][1:])
 
 
-def field_poses(model, s, g, sign: int, spots: np.ndarray, fit, tier, config: FastConfig, context, exact, x):
+def field_poses(model, s, g, sign: int, spots: np.ndarray, fit, tier, config: FastConfig, context, exact, x,
+                keep: int | None = None):
     """A field tier's hypotheses at the places ``spots``: screened on the field with the data's normals
     (or, in a tilted tier, with normals tilted out to ``tier.tilt`` degrees, then each of the best
     few set on a dense local grid: :func:`tactrec.engine.screen.local_screen`), the best
-    ``screen_keep`` refined on the field and the best ``2 refine`` of those taking one exact step.
+    ``screen_keep`` (or ``keep``) refined on the field and the best ``2 refine`` of those taking one exact step.
     ``model`` and ``s`` are the mesh and the touch as the search sees them
     (:meth:`~tactrec.features.Touch.searched`), ``g`` the touch's estimate on the side tried;
     ``context`` the other touches' points the screen scores; ``exact`` what the exact step measures
@@ -161,7 +162,7 @@ def field_poses(model, s, g, sign: int, spots: np.ndarray, fit, tier, config: Fa
     for dn, kind in normals:
         onto = model.fine_curvatures.normal[spots] if kind == "fitted" else model.vertex_normals[spots]
         found = screen(model, g, spots, onto, s.curves, dn,
-                       stages=stages, keep=config.screen_keep, extra=context)
+                       stages=stages, keep=config.screen_keep if keep is None else keep, extra=context)
         R, tr, grid = field_refine(*field.args(), found.R, found.t, x3, config.field_steps)
         lookups += found.lookups + len(R) * len(x3) * (config.field_steps + 1)
         tried += len(found.owner)

@@ -111,6 +111,7 @@ class PaperMethod:
     name = "paper"
     scores_context = False
     uses_engine = False
+    uses_index = False
     Config = PaperConfig
 
     def configure(self, **options) -> PaperConfig:
@@ -119,7 +120,8 @@ class PaperMethod:
     def prepare(self, model) -> None:
         """Nothing beyond the lookup table, which the database holds."""
 
-    def search(self, touch, models, config: PaperConfig, runner, *, among=None, budget=None) -> SearchOutcome:
+    def search(self, touch, models, config: PaperConfig, runner, *, among=None, budget=None,
+               index=None) -> SearchOutcome:
         """Every model at ``among`` (all when None) searched in full: the paper's method has no budget."""
         own = config.geometry(touch.data)          # this reading's estimate, once for every model
         if own is not None:

@@ -134,6 +134,12 @@ class Recognizer:
             from ..engine.kernels import warm
 
             warm()         # compiled or loaded now, not in a recognition's seconds; forked workers inherit it
+        #: the catalogue's index of places (:mod:`tactrec.index`), for a method that ranks places by it
+        self.index = None
+        if getattr(self.method, "uses_index", False):
+            from ..index import PlaceIndex
+
+            self.index = PlaceIndex(self.models)
         held = Held(self.models)
         self.runner = Pool(held, int(workers)) if int(workers) >= 2 and can_fork() else Serial(held)
 
@@ -193,7 +199,8 @@ class Recognizer:
 
         def searched(d, left):
             def search(t):
-                return self.method.search(t, self.models, self.config, self.runner, among=chosen, budget=left)
+                return self.method.search(t, self.models, self.config, self.runner, among=chosen, budget=left,
+                                          index=self.index)
             touch = Touch.from_data(d, **self.estimation)
             if context is not None and len(context.curves):
                 touch = touch.with_context(context)

@@ -31,6 +31,7 @@ from ..estimation import LocalGeometry
 from ..linalg import compose, rotate, stable_order, stable_prefix, times, transform
 from ..surfaces.mesh import MeshModel
 from ..surfaces.mesh_curvature import fitted_frame, quadric_curvatures, tangents
+from ..surfaces.mesh_grid import cells as _cells, first_per_cell
 from .result import Registration, cross, local_frame, rotations_from_vectors, rotations_z
 from .step import covariance
 
@@ -98,20 +99,6 @@ def leading_places(gaps: np.ndarray, count: int | None, thin) -> np.ndarray:
         if count is None or len(chosen) >= count or len(order) >= n:
             return chosen
         head = min(n, 2 * len(order))
-
-
-def _cells(model: MeshModel, vertices: np.ndarray, size: float) -> np.ndarray:
-    """The cell of a grid ``size`` across each of ``vertices (n,)`` lies in, as one integer each."""
-    low = model.bounds[0]
-    span = np.floor((model.bounds[1] - low) / size).astype(np.int64) + 1
-    cell = np.floor((model.vertices[vertices] - low) / size).astype(np.int64)
-    return (cell[:, 0] * span[1] + cell[:, 1]) * span[2] + cell[:, 2]
-
-
-def first_per_cell(model: MeshModel, order: np.ndarray, size: float) -> np.ndarray:
-    """Of the vertices ``order (n,)``, the first of each cell of a grid ``size`` across, in that order."""
-    _, first = np.unique(_cells(model, order, size), return_index=True)
-    return order[np.sort(first)]
 
 
 def first_per_place(model: MeshModel, order: np.ndarray, size: float, angle: float, *,

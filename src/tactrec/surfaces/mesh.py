@@ -83,7 +83,7 @@ class MeshModel(SurfaceModel):
         return {"mesh_vertices": self.vertices, "mesh_faces": self.faces,
                 "mesh_units": np.array(self.units or ""), "mesh_scale": np.array(self.scale),
                 "mesh_k1": f.k1, "mesh_k2": f.k2, "mesh_d1": f.d1, "mesh_normal": f.normal,
-                "mesh_fit_radius": np.array(f.radius), **self.distance_field.to_store()}
+                "mesh_fit_radius": np.array(f.radius), **self.distance_field.to_store(), **self.place_rings.to_store()}
 
     @classmethod
     def from_store(cls, arrays, *, name: str, source: str) -> "MeshModel":
@@ -111,6 +111,9 @@ class MeshModel(SurfaceModel):
 
         if any(key in arrays for key in OUTER_KEYS) and not all(key in arrays for key in OUTER_KEYS):
             raise ValueError("the stored outer field is malformed")
+        if "rings_places" in arrays:            # the index's rows (:attr:`place_rings`)
+            from .mesh_rings import PlaceRings
+            model.__dict__["place_rings"] = PlaceRings.from_store(arrays, n)
         model._stored_field = arrays            # read when first used: a database loads in a moment
         return model
 
@@ -274,6 +277,12 @@ class MeshModel(SurfaceModel):
         Kept in a database, so a recognition does not recompute it."""
         return curvature_field(self.vertices, self.vertex_normals, self.vertex_tree,
                                self.vertex_frames(np.arange(len(self.vertices))), radius=3.0 * self.mean_edge)
+
+    @cached_property
+    def place_rings(self):
+        """Its places and their rings, the index's rows (:func:`tactrec.surfaces.mesh_rings.model_rings`); kept in a database."""
+        from .mesh_rings import model_rings
+        return model_rings(self)
 
     def table_samples(self, *, resolution=None, rng=0) -> TableSamples:
         """The paper's mesh table (Section 5.2): :func:`.mesh_table.table_samples`."""

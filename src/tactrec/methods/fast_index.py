@@ -1,0 +1,113 @@
+"""Method ``fast``'s indexed tier: the catalogue's best places by the index of places
+(:mod:`tactrec.index`), screened on their models' fields in rounds.
+
+The first tier of the schedule (:data:`~tactrec.methods.fast_config.TIERS`) takes, over the models
+searched, the ``places`` x models places whose rings lie nearest the touch's
+(:meth:`tactrec.index.PlaceIndex.ranked`): as many places as a tier of each model's best
+``places`` would, but chosen across the catalogue, so that a model whose surface is nothing like
+the touch's takes none.  They are screened in rounds, best first: the first round
+``index_round`` places, each later one twice as many, over the models whose turn it is (the
+search's own rule, :meth:`~tactrec.methods.fast_state.State.contending`: the leaders first while
+they stand near the best; else every model with places left).  A model's first tier ends when
+its places in the ranking are all screened, or at once where it has none; a search that settles
+(a fit, or a clear best) stops between rounds, so most touches screen a few thousand places of a
+catalogue, not every model's 500.
+
+Each model screens its places of a round at every rotation on its field
+(:func:`~tactrec.methods.fast_stages.field_poses`), keeping ``index_keep`` hypotheses a place for
+the field steps, then the selection and refinement of any tier.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..engine import LOOKUP_COST
+from ..linalg import stable_order
+from ..registration.result import Outcome
+from .common import in_model_units
+from .fast_stages import Cheap, Poses, field_poses, touch_gaps
+
+__all__ = ["IndexedTier", "indexed_stage", "round_cost"]
+
+
+class IndexedTier:
+    """One touch's progress through the indexed tier ``k`` over the mesh models ``meshes``."""
+
+    def __init__(self, index, touch, meshes: list[int], config, k: int):
+        self.k, self.config = k, config
+        self.ranked = index.ranked(touch, meshes, config.tiers[k].places * len(meshes))
+        self.done = np.zeros(len(self.ranked), dtype=bool)
+        self.rounds = 0
+
+    def left(self, i: int) -> bool:
+        """Whether model ``i`` has places of the ranking not yet screened."""
+        return bool(np.any((self.ranked.model == i) & ~self.done))
+
+    def next_round(self, group: list[int]) -> dict[int, dict[int, np.ndarray]]:
+        """The next round's places of the models ``group``: per model, per side of the normal, its
+        vertices in the ranking's order; marked screened."""
+        size = self.config.index_round * 2 ** self.rounds
+        take = np.flatnonzero(~self.done & np.isin(self.ranked.model, group))[:size]
+        self.done[take] = True
+        self.rounds += 1
+        out: dict[int, dict[int, np.ndarray]] = {}
+        for i in np.unique(self.ranked.model[take]):
+            mine = take[self.ranked.model[take] == i]
+            out[int(i)] = {int(sign): self.ranked.vertex[mine[self.ranked.sign[mine] == sign]]
+                           for sign in np.unique(self.ranked.sign[mine])}
+        return out
+
+
+def round_cost(config, spots: dict[int, dict[int, np.ndarray]], curves: int, context: int) -> int:
+    """About how many closest-point queries a round of the indexed tier costs (as
+    :func:`~tactrec.methods.fast.tier_cost` counts a field tier)."""
+    total = 0.0
+    for sides in spots.values():
+        for vertices in sides.values():
+            alive, lookups = len(vertices), 0
+            for rotations, per_curve, share in config.screen_stages:
+                lookups += alive * rotations * (per_curve * curves + context)
+                alive = min(alive, max(config.screen_keep, int(np.ceil(share * alive))))
+            kept = min(config.screen_keep, config.index_keep * len(vertices))
+            lookups += kept * (config.field_steps + 1) * 3 * config.coarse_points * curves
+            total += 2 * (lookups * LOOKUP_COST + 2 * config.refine * config.coarse_points * curves)
+        total += config.refine * config.iterations * curves * 3 * config.coarse_points
+    return int(total)
+
+
+def indexed_stage(held, indices, touch, config, k: int, spots: list[dict[int, np.ndarray]]) -> list[Cheap]:
+    """Step 1 of an indexed round on each mesh model: its places of the round (``spots``: per side of
+    the normal, vertices) screened on its field; its best ``refine`` poses and their cheap scores."""
+    tier = config.tiers[k]
+    out = []
+    for index, sides in zip(indices, spots):
+        model = held.entries[index].model
+        t = in_model_units(touch, model)
+        if t.radius > model.size or t.joint_reach > model.size:
+            out.append(Cheap(Outcome.REJECTED, 0, reason="the touch is larger than the model"))
+            continue
+        x = t.joint_subset(config.coarse_points)
+        exact = t.exact(model, config.coarse_points)
+        poses, queries, tried = [], 0, 0
+        for sign, _ in t.sides:
+            vertices = sides.get(sign)
+            if vertices is None or len(vertices) == 0:
+                continue
+            seen, s, g = t.searched(model, sign)                 # (a) of tactrec.tip
+            _, fit = touch_gaps(held, index, seen, s, g, sign)
+            context = s.screen_subset(config.coarse_points)[len(s.subset(config.coarse_points)):] \
+                if t.context else None
+            R, tr, score, q, n = field_poses(seen, s, g, sign, vertices, fit, tier, config, context, exact, x,
+                                             keep=min(config.screen_keep, config.index_keep * len(vertices)))
+            tried, queries = tried + n, queries + q
+            poses.append((R, tr, score, np.full(len(R), sign)))
+        if not poses:
+            out.append(Cheap(Outcome.NOT_SEARCHED, int(queries), tried))
+            continue
+        R, tr, score, signs = (np.concatenate([p[i] for p in poses]) for i in range(4))
+        keep = stable_order(score)[:config.refine]
+        out.append(Cheap(Outcome.FITTED, int(queries), tried, Poses(R[keep], tr[keep], score[keep] / t.scale,
+                                                                       signs[keep])))
+    return out
+
