@@ -61,32 +61,42 @@ class PlaceIndex:
         """Whether ``touch``'s curves reach at least one ring (else the index cannot rank for it)."""
         return bool(np.any(np.isfinite(touch_rings(touch, 1))))
 
+    def _distances(self, touch, among) -> tuple:
+        """The rows of the models ``among`` and each one's distance to ``touch``'s rings and side of the
+        normal (the least over the touch's :attr:`~tactrec.features.Touch.sides`); kept for the touch."""
+        chosen = np.asarray(sorted(among), dtype=np.int64)
+        key = (touch.key, chosen.tobytes())
+        if key not in self._ranked:
+            rows = np.flatnonzero(np.isin(self.owner, chosen))
+            best = np.full(len(rows), np.inf)
+            side = np.ones(len(rows), dtype=np.int8)
+            for sign, _ in touch.sides:
+                wanted = touch_rings(touch, sign)
+                d = np.zeros(len(rows))
+                for j in np.flatnonzero(np.isfinite(wanted)):
+                    d += (self.features[rows, j].astype(np.float64) - wanted[j]) ** 2
+                side = np.where(d < best, np.int8(sign), side)
+                best = np.minimum(best, d)
+            self._ranked = {key: (rows, best, side, stable_order(best))}
+        return self._ranked[key]
+
+    def _of(self, rows, best, side, order) -> Ranked:
+        r = rows[order]
+        return Ranked(self.owner[r].astype(np.int64), self.vertex[r], side[order].astype(np.int64), best[order])
+
     def ranked(self, touch, among, count: int) -> Ranked:
         """The ``count`` places of the models ``among`` (indices) nearest ``touch``'s rings, best
-        first, over the normals the touch may have (:attr:`~tactrec.features.Touch.sides`); kept
-        for the touch."""
-        chosen = np.asarray(sorted(among), dtype=np.int64)
-        key = (touch.key, chosen.tobytes(), int(count))
-        if key in self._ranked:
-            return self._ranked[key]
-        rows = np.flatnonzero(np.isin(self.owner, chosen))
-        best = np.full(len(rows), np.inf)
-        side = np.ones(len(rows), dtype=np.int8)
-        for sign, _ in touch.sides:
-            wanted = touch_rings(touch, sign)
-            d = np.zeros(len(rows))
-            for j in np.flatnonzero(np.isfinite(wanted)):
-                d += (self.features[rows, j].astype(np.float64) - wanted[j]) ** 2
-            side = np.where(d < best, np.int8(sign), side)
-            best = np.minimum(best, d)
-        k = min(int(count), len(rows))
-        if k < len(rows):
-            part = np.argpartition(best, k - 1)[:k]
-            part = np.flatnonzero(best <= best[part].max())           # ties at the cut kept, then ordered
-        else:
-            part = np.arange(len(rows))
-        order = part[stable_order(best[part])][:k]
-        r = rows[order]
-        found = Ranked(self.owner[r].astype(np.int64), self.vertex[r], side[order].astype(np.int64), best[order])
-        self._ranked = {key: found}
-        return found
+        first, over the normals the touch may have (:attr:`~tactrec.features.Touch.sides`)."""
+        rows, best, side, order = self._distances(touch, among)
+        return self._of(rows, best, side, order[:int(count)])
+
+    def each_best(self, touch, among, count: int) -> Ranked:
+        """Each model's own ``count`` places nearest ``touch``'s rings (of the models ``among``), by
+        model, each model's best first."""
+        rows, best, side, order = self._distances(touch, among)
+        owner = self.owner[rows[order]]
+        by_model = order[np.argsort(owner, kind="stable")]              # by model, each in the ranking's order
+        grouped = self.owner[rows[by_model]]
+        start = np.r_[0, np.flatnonzero(np.diff(grouped)) + 1]
+        position = np.arange(len(by_model)) - np.repeat(start, np.diff(np.r_[start, len(by_model)]))
+        return self._of(rows, best, side, by_model[position < int(count)])

@@ -140,7 +140,10 @@ from .fast_stages import (cheap_stage, closed_form_stage, field_stages, hop_cost
                           tier_span)
 from .fast_state import State, error_of, grid_leaders, tier_places
 
-__all__ = ["FastMethod", "FastConfig", "Tier", "TIERS", "tier_cost", "tier_places"]
+__all__ = ["FastMethod", "FastConfig", "Tier", "TIERS", "tier_cost", "tier_places", "UNRANKED"]
+
+#: why a model was not searched: the search settled before it reached any of the model's places
+UNRANKED = "not searched: the search settled before any of its places, in the index's order"
 
 
 # ---------------------------------------------------------------------- the search
@@ -327,6 +330,8 @@ class FastMethod:
                 ranking.append(Registration.unfitted(entry.name, state.rejected[i]))
             elif i not in state.cheapest:
                 ranking.append(Registration.unfitted(entry.name, NOT_SEARCHED, Outcome.NOT_SEARCHED))
+            elif not np.isfinite(state.cheapest[i]):            # no place of it screened (the index ranked none)
+                ranking.append(Registration.unfitted(entry.name, UNRANKED, Outcome.NOT_SEARCHED))
             else:
                 ranking.append(Registration.unfitted(
                     entry.name, f"deferred: its best cheap score {state.cheapest[i]:.3g} stayed beyond "

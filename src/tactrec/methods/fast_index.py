@@ -6,12 +6,18 @@ searched, the ``places`` x models places whose rings lie nearest the touch's
 (:meth:`tactrec.index.PlaceIndex.ranked`): as many places as a tier of each model's best
 ``places`` would, but chosen across the catalogue, so that a model whose surface is nothing like
 the touch's takes none.  They are screened in rounds, best first: the first round
-``index_round`` places, each later one twice as many, over the models whose turn it is (the
+``index_round`` places and every model's own best ``index_floor``, each later one twice as many, over the models whose turn it is (the
 search's own rule, :meth:`~tactrec.methods.fast_state.State.contending`: the leaders first while
 they stand near the best; else every model with places left).  A model's first tier ends when
-its places in the ranking are all screened, or at once where it has none; a search that settles
-(a fit, or a clear best) stops between rounds, so most touches screen a few thousand places of a
-catalogue, not every model's 500.
+its places in the ranking are all screened; a search that settles (a fit, or a clear best) stops
+between rounds, so most touches screen a few thousand places of a catalogue, not every model's 500.
+
+Every model's own best few places are in the first round because differences of rings below the
+touch's noise and a place's offset from the contact (up to a cell) mean nothing: where two models
+share the touched surface (a face two parts have, spheres of 30 and 31 mm), the catalogue's order
+may put all of one's places before the other's, and a search that stopped on the first fit would
+never pose the other, and call the answer sure.  With its best places screened, each model has a
+cheap score, and the search's rules (deferral, a clear best) judge it as in any tier.
 
 Each model screens its places of a round at every rotation on its field
 (:func:`~tactrec.methods.fast_stages.field_poses`), keeping ``index_keep`` hypotheses a place for
@@ -37,25 +43,37 @@ class IndexedTier:
     def __init__(self, index, touch, meshes: list[int], config, k: int):
         self.k, self.config = k, config
         self.ranked = index.ranked(touch, meshes, config.tiers[k].places * len(meshes))
+        self.floor = index.each_best(touch, meshes, config.index_floor)
         self.done = np.zeros(len(self.ranked), dtype=bool)
         self.rounds = 0
 
+    @staticmethod
+    def _keys(ranked) -> np.ndarray:
+        return (ranked.model * (2 ** 31) + ranked.vertex) * 2 + (ranked.sign > 0)
+
     def left(self, i: int) -> bool:
-        """Whether model ``i`` has places of the ranking not yet screened."""
-        return bool(np.any((self.ranked.model == i) & ~self.done))
+        """Whether model ``i`` has places not yet screened: its own best before the first round, or
+        places of the ranking."""
+        return bool((self.rounds == 0 and np.any(self.floor.model == i)) or np.any((self.ranked.model == i) & ~self.done))
 
     def next_round(self, group: list[int]) -> dict[int, dict[int, np.ndarray]]:
         """The next round's places of the models ``group``: per model, per side of the normal, its
         vertices in the ranking's order; marked screened."""
         size = self.config.index_round * 2 ** self.rounds
         take = np.flatnonzero(~self.done & np.isin(self.ranked.model, group))[:size]
+        model, vertex, sign = self.ranked.model[take], self.ranked.vertex[take], self.ranked.sign[take]
+        if self.rounds == 0:                    # and every model's own best places
+            floor = self.floor
+            extra = np.isin(floor.model, group) & ~np.isin(self._keys(floor), self._keys(self.ranked)[take])
+            model, vertex, sign = (np.concatenate([a, b[extra]]) for a, b in
+                                   ((model, floor.model), (vertex, floor.vertex), (sign, floor.sign)))
+            self.done |= np.isin(self._keys(self.ranked), self._keys(floor)[np.isin(floor.model, group)])
         self.done[take] = True
         self.rounds += 1
         out: dict[int, dict[int, np.ndarray]] = {}
-        for i in np.unique(self.ranked.model[take]):
-            mine = take[self.ranked.model[take] == i]
-            out[int(i)] = {int(sign): self.ranked.vertex[mine[self.ranked.sign[mine] == sign]]
-                           for sign in np.unique(self.ranked.sign[mine])}
+        for i in np.unique(model):
+            mine = model == i
+            out[int(i)] = {int(s): vertex[mine & (sign == s)] for s in np.unique(sign[mine])}
         return out
 
 
