@@ -148,5 +148,10 @@ def connect(address: str) -> Cluster:
     except Exception:                             # noqa: BLE001 -- a timeout, or the scheduler gone meanwhile
         cluster.close()
         raise InputError(f"the Dask scheduler has no worker (waited {WAIT_WORKERS:g} s)", address) from None
-    client.register_plugin(ShardPlugin(), name=PLUGIN)
+    try:
+        client.register_plugin(ShardPlugin(), name=PLUGIN)
+    except Exception as exc:                      # noqa: BLE001 -- a worker that cannot unpickle or set it up
+        cluster.close()
+        raise InputError(f"the Dask workers cannot hold tactrec's shards ({type(exc).__name__}: "
+                         f"{' '.join(str(exc).split())[:200]}); each must import the same tactrec", address) from None
     return cluster
