@@ -154,23 +154,10 @@ def _read_index(db: Path, *, partial: bool = False) -> dict:
     return index
 
 
-class FieldsOnWorkers:
-    """In place of a mesh's stored fields where it was loaded without them (a cluster's client, whose
-    searches run on the workers): reading a field is an error, never a silent rebuild."""
-
-    def __init__(self, path: Path):
-        self.path = path
-
-    def __contains__(self, key):
-        raise RuntimeError(f"{self.path}: loaded without its distance fields (they are read on the cluster's "
-                           "workers), yet a field was read here")
-
-    __getitem__ = __contains__
-
-
 def _load_entry(db: Path, item: dict, *, fields: bool = True) -> ModelEntry:
     """The model of the index entry ``item`` of the database ``db``, checked against its checksum;
-    without ``fields``, a mesh keeps none of its distance fields' bytes (:class:`FieldsOnWorkers`)."""
+    without ``fields``, a mesh keeps none of its distance fields' bytes
+    (:class:`~tactrec.surfaces.mesh_field.FieldsElsewhere`)."""
     path = db / item["file"]
     if Path(item["file"]).name != item["file"]:
         raise InputError("corrupted database index (bad file name)", db / "index.json")
@@ -193,7 +180,9 @@ def _load_entry(db: Path, item: dict, *, fields: bool = True) -> ModelEntry:
     except (ValueError, KeyError, OSError, EOFError) as exc:
         raise InputError(f"corrupted database file ({exc.__class__.__name__}: {exc})", path) from None
     if not fields and getattr(model, "_stored_field", None) is not None:
-        model._stored_field = FieldsOnWorkers(path)
+        from .surfaces.mesh_field import FieldsElsewhere
+
+        model._stored_field = FieldsElsewhere(arrays, path)
     return ModelEntry(model, table, (str(db), dict(item)))
 
 
