@@ -136,14 +136,11 @@ class Recognizer:
         tips = tuple(float(r) for r in tips)
         if not all(np.isfinite(r) and r > 0 for r in tips):
             raise InputError(f"a tip radius is a positive number (got {tips})", "tips")
-        if cluster is not None:                            # the workers load and prepare their shards
-            self.runner = cluster.runner(self.models, method=self.method.name, tips=tips)
-            return
-        for entry in self.models:
+        for entry in self.models if cluster is None else ():     # on a cluster, its workers prepare their shards
             self.method.prepare(entry.model)
             for r in tips if entry.model.kind == "mesh" else ():
                 entry.model.offset(float(r)).distance_field
-        if self.method.uses_engine:
+        if self.method.uses_engine and cluster is None:
             from ..engine.kernels import warm
 
             warm()         # compiled or loaded now, not in a recognition's seconds; forked workers inherit it
@@ -153,6 +150,9 @@ class Recognizer:
             from ..index import PlaceIndex
 
             self.index = PlaceIndex(self.models)
+        if cluster is not None:
+            self.runner = cluster.runner(self.models, method=self.method.name, tips=tips)
+            return
         held = Held(self.models)
         self.runner = Pool(held, int(workers)) if int(workers) >= 2 and can_fork() else Serial(held)
 
