@@ -14,7 +14,7 @@ import sys
 import numpy as np
 
 from . import __version__
-from .errors import InputError
+from .errors import InputError, ShardsUnavailable
 
 EXIT_BAD_INPUT = 2
 
@@ -112,6 +112,9 @@ def _one_source(args, command: str) -> None:
     """Refuse a command given both or neither of ``--db`` and ``--models``."""
     if (args.db is None) == (not args.models):
         raise InputError("give either --db DB or --models MODEL...", f"tactrec {command}")
+    if getattr(args, "cluster", None) and args.models:
+        raise InputError("--cluster runs on a database's files, which its workers load: build one with "
+                         "'tactrec build' and give --db", f"tactrec {command}")
 
 
 def _warn(line: str) -> None:
@@ -120,10 +123,12 @@ def _warn(line: str) -> None:
 
 # ---------------------------------------------------------------------- commands
 def cmd_build(args) -> int:
+    from .cli_cluster import opened
     from .database import build_database
 
-    report = build_database(args.models, args.out, quiet=args.quiet, units=args.units, scale=args.scale,
-                            tips=args.tip_radius or ())
+    with opened(args) as cluster:
+        report = build_database(args.models, args.out, quiet=args.quiet, units=args.units, scale=args.scale,
+                                tips=args.tip_radius or (), cluster=cluster)
     if not args.quiet:
         removed = f", {len(report.removed)} old file(s) removed" if report.removed else ""
         print(f"{report.path}: {len(report.built)} built, {len(report.reused)} unchanged{removed}")
@@ -152,7 +157,8 @@ def cmd_recognize(args) -> int:
     from .runner import workers_for
 
     _one_source(args, "recognize")
-    from .cli_session import format_session, recognize_session
+    from .cli_cluster import opened
+    from .cli_session import format_result, format_session, recognize_session
     from .io.session import is_session_file, load_session
 
     method = get_method(args.method)
@@ -162,12 +168,13 @@ def cmd_recognize(args) -> int:
         # validate everything first; a session file is recognised as one object, one pose
         inputs = [load_session(path) if is_session_file(path) else load_touch(path) for path in args.data]
         db = open_models(db=args.db, models=args.models, warn=_warn, quiet=args.quiet, units=args.units,
-                         scale=args.scale)
+                         scale=args.scale, fields=args.cluster is None)
     finally:
         if loading is not None:
             loading.join()
-    with Recognizer(db, method=args.method, workers=workers_for(db), unknown_prior=args.unknown_prior,
-                    **_recognition_options(args)) as recognizer:
+    with opened(args) as cluster, \
+            Recognizer(db, method=args.method, workers=workers_for(db), unknown_prior=args.unknown_prior,
+                       cluster=cluster, **_recognition_options(args)) as recognizer:
         results = [recognize_session(recognizer, x).result if isinstance(x, list) else recognizer.recognize(x)
                    for x in inputs]
     out_lines = []
@@ -177,27 +184,9 @@ def cmd_recognize(args) -> int:
         elif isinstance(x, list):
             out_lines.append(format_session(str(path), result))
         else:
-            out_lines.append(_format_result(str(path), result))
+            out_lines.append(format_result(str(path), result))
     sys.stdout.write("\n".join(out_lines) + "\n")
     return 0
-
-
-def _format_result(name: str, result) -> str:
-    est = result.estimate
-    flag = f", confidence {result.confidence:.3f}, unknown {result.unknown:.3f}" if result.best else ""
-    flag += ", ambiguous" if result.ambiguous else ""
-    if not result.settled:
-        flag += ", unsettled: the search's budget ran out before a fit within the noise"
-    lines = [f"{name}: {'best ' + result.best if result.best else 'no model matches'}"
-             f"   (k1 {est.k1:.4g}, k2 {est.k2:.4g}; {result.seconds:.2f} s, method {result.method}{flag})"]
-    for rank, r in enumerate(result.ranking, start=1):
-        if r.ok:
-            loc = ", ".join(f"{x:.4g}" for x in r.location)
-            lines.append(f"  {rank:2d}. {r.model:24s} error {r.error:.6g}   candidates {r.candidates:5d}"
-                         f"   at ({loc})")
-        else:
-            lines.append(f"   -. {r.model:24s} rejected: {r.rejected}")
-    return "\n".join(lines)
 
 
 def cmd_simulate(args) -> int:
@@ -255,6 +244,7 @@ def _mesh_options(p) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from .cli_cluster import add_cluster_option
     from .methods import DEFAULT_METHOD, METHODS
 
     parser = _Parser(prog="tactrec", description="Recognise an object and locate a touch on it from three "
@@ -279,6 +269,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="also store each mesh's field offset by these tip radii (the meshes' units), at the "
                    "mesh's own spacing; any tip up to 10 mm is read from the stored fields without a build")
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
+    add_cluster_option(p)
     p.set_defaults(func=cmd_build)
 
     p = sub.add_parser("recognize", help="recognise touches against a database")
@@ -296,6 +287,7 @@ def build_parser() -> argparse.ArgumentParser:
     _mesh_options(p)
     unknown_prior_option(p)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_cluster_option(p)
     p.set_defaults(func=cmd_recognize)
 
     from .cli_session import add_next_parser
@@ -371,6 +363,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="answers: another run's answers.json, to list the entries whose JSON differs")
     p.add_argument("--out", metavar="DIR", help="output folder (default bench-out)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_cluster_option(p, several=True)
     p.set_defaults(func=cmd_bench)
     return parser
 
@@ -384,6 +377,11 @@ def main(argv=None) -> int:
     except InputError as exc:
         print(f"tactrec: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except ShardsUnavailable as exc:                       # --cluster: a result would leave models out
+        from .cli_cluster import EXIT_UNAVAILABLE
+
+        print(f"tactrec: {exc}", file=sys.stderr)
+        return EXIT_UNAVAILABLE
     except KeyboardInterrupt:
         print("tactrec: interrupted", file=sys.stderr)
         return 130

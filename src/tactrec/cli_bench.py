@@ -6,7 +6,7 @@ from pathlib import Path
 
 from .errors import InputError
 
-__all__ = ["cmd_bench", "PAPER_OPTION_BENCHMARKS", "SCAN_KINDS"]
+__all__ = ["cmd_bench", "PAPER_OPTION_BENCHMARKS", "SCAN_KINDS", "CLUSTER_BENCHMARKS"]
 
 
 #: benchmarks that take the ``paper`` method's readings (``--paper-option``)
@@ -21,6 +21,9 @@ def _known(values: list, known, what: str, option: str, name: str) -> tuple:
         raise InputError(f"unknown {what} {unknown[0]!r}; {name} has {', '.join(known)}", option)
     return tuple(values)
 
+
+#: benchmarks that run on clusters too (``--cluster ADDRESS,...``: each a configuration beside one process)
+CLUSTER_BENCHMARKS = ("scale-out",)
 
 #: the benchmarks that take ``--scans``, and which kinds each takes
 SCAN_KINDS = {**{name: ("shipped", "paper-like") for name in ("paper-fig11", "paper-table6", "paper-steps")},
@@ -103,6 +106,10 @@ def cmd_bench(args) -> int:
         extra["against"] = _answers_file(args.against)
     if args.paper_option:
         extra["options"] = dict(args.paper_option)
+    if args.cluster is not None:
+        if args.name not in CLUSTER_BENCHMARKS:
+            raise InputError(f"--cluster applies to {', '.join(CLUSTER_BENCHMARKS)} only", args.name)
+        extra["cluster"] = args.cluster
     if args.delta_only or args.lengths or args.angles:
         from .bench.paper_fig11 import DEFAULTS, SWEEPS
 

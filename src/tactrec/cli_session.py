@@ -5,12 +5,12 @@ from __future__ import annotations
 import json
 import sys
 
+from .cli_cluster import add_cluster_option
 from .errors import InputError
-
 from .service import DEFAULT_RADIUS_MM, default_radius
 
-__all__ = ["recognize_session", "format_session", "cmd_next", "add_next_parser", "cmd_serve", "add_serve_parser",
-           "DEFAULT_RADIUS_MM"]
+__all__ = ["recognize_session", "format_result", "format_session", "cmd_next", "add_next_parser", "cmd_serve",
+           "add_serve_parser", "DEFAULT_RADIUS_MM"]
 
 
 def recognize_session(recognizer, touches):
@@ -25,6 +25,25 @@ def recognize_session(recognizer, touches):
         else:
             session.add(t.data, (t.rotation, t.translation))
     return session
+
+
+def format_result(name: str, result) -> str:
+    """The text form of a touch's result (``tactrec recognize`` without ``--json``)."""
+    est = result.estimate
+    flag = f", confidence {result.confidence:.3f}, unknown {result.unknown:.3f}" if result.best else ""
+    flag += ", ambiguous" if result.ambiguous else ""
+    if not result.settled:
+        flag += ", unsettled: the search's budget ran out before a fit within the noise"
+    lines = [f"{name}: {'best ' + result.best if result.best else 'no model matches'}"
+             f"   (k1 {est.k1:.4g}, k2 {est.k2:.4g}; {result.seconds:.2f} s, method {result.method}{flag})"]
+    for rank, r in enumerate(result.ranking, start=1):
+        if r.ok:
+            loc = ", ".join(f"{x:.4g}" for x in r.location)
+            lines.append(f"  {rank:2d}. {r.model:24s} error {r.error:.6g}   candidates {r.candidates:5d}"
+                         f"   at ({loc})")
+        else:
+            lines.append(f"   -. {r.model:24s} rejected: {r.rejected}")
+    return "\n".join(lines)
 
 
 def format_session(name: str, result) -> str:
@@ -46,6 +65,7 @@ def format_session(name: str, result) -> str:
 
 def cmd_next(args, *, open_models, options, warn) -> int:
     """``tactrec next SESSION --db DB``: where to touch next."""
+    from .cli_cluster import opened
     from .io.session import load_session
     from .recognition import Recognizer
     from .runner import workers_for
@@ -53,9 +73,10 @@ def cmd_next(args, *, open_models, options, warn) -> int:
     touches = load_session(args.session)
     units = next(t.data.units for t in touches if hasattr(t, "data"))
     radius = args.radius if args.radius is not None else default_radius(units)
-    db = open_models(db=args.db, models=args.models, warn=warn, quiet=args.quiet, units=args.units, scale=args.scale)
-    with Recognizer(db, method=args.method, workers=workers_for(db), unknown_prior=args.unknown_prior,
-                    **options) as recognizer:
+    db = open_models(db=args.db, models=args.models, warn=warn, quiet=args.quiet, units=args.units, scale=args.scale,
+                     fields=args.cluster is None)
+    with opened(args) as cluster, Recognizer(db, method=args.method, workers=workers_for(db), cluster=cluster,
+                                             unknown_prior=args.unknown_prior, **options) as recognizer:
         session = recognize_session(recognizer, touches)
         if not session.result.ranking:
             raise InputError("no model fits any touch of the session: nothing to propose", args.session)
@@ -92,17 +113,20 @@ def add_next_parser(sub, *, positive, mesh_options, methods, default_method) -> 
     p.add_argument("--seed", type=int, default=0, help="random seed of the candidate places (default 0)")
     mesh_options(p)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_cluster_option(p)
 
 
 def cmd_serve(args, *, open_models, options, warn) -> int:
     """``tactrec serve --db DB``: requests on standard input, answers on standard output (:mod:`tactrec.service`)."""
+    from .cli_cluster import opened
     from .recognition import Recognizer
     from .runner import workers_for
     from .service import serve
 
-    db = open_models(db=args.db, models=args.models, warn=warn, quiet=True, units=args.units, scale=args.scale)
-    with Recognizer(db, method=args.method, workers=workers_for(db), unknown_prior=args.unknown_prior,
-                    **options) as recognizer:
+    db = open_models(db=args.db, models=args.models, warn=warn, quiet=True, units=args.units, scale=args.scale,
+                     fields=args.cluster is None)
+    with opened(args) as cluster, Recognizer(db, method=args.method, workers=workers_for(db), cluster=cluster,
+                                             unknown_prior=args.unknown_prior, **options) as recognizer:
         if not args.quiet:
             print(f"tactrec serve: {len(db)} models, {args.method}; one JSON request per line", file=sys.stderr,
                   flush=True)
@@ -123,4 +147,5 @@ def add_serve_parser(sub, *, count, mesh_options, methods, default_method):
     p.add_argument("--seed", type=count(0), default=0, help="next's seed where a request gives none (default 0)")
     mesh_options(p)
     p.add_argument("--quiet", action="store_true", help="nothing on standard error but errors")
+    add_cluster_option(p)
     return p

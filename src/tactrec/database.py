@@ -154,7 +154,10 @@ def _read_index(db: Path, *, partial: bool = False) -> dict:
     return index
 
 
-def _load_entry(db: Path, item: dict) -> ModelEntry:
+def _load_entry(db: Path, item: dict, *, fields: bool = True) -> ModelEntry:
+    """The model of the index entry ``item`` of the database ``db``, checked against its checksum;
+    without ``fields``, a mesh keeps none of its distance fields' bytes
+    (:class:`~tactrec.surfaces.mesh_field.FieldsElsewhere`)."""
     path = db / item["file"]
     if Path(item["file"]).name != item["file"]:
         raise InputError("corrupted database index (bad file name)", db / "index.json")
@@ -176,20 +179,26 @@ def _load_entry(db: Path, item: dict) -> ModelEntry:
         raise InputError(f"corrupted database file ({exc.reason})", path) from None
     except (ValueError, KeyError, OSError, EOFError) as exc:
         raise InputError(f"corrupted database file ({exc.__class__.__name__}: {exc})", path) from None
-    return ModelEntry(model, table)
+    if not fields and getattr(model, "_stored_field", None) is not None:
+        from .surfaces.mesh_field import FieldsElsewhere
+
+        model._stored_field = FieldsElsewhere(arrays, path)
+    return ModelEntry(model, table, (str(db), dict(item)))
 
 
-def load_database(path: str | os.PathLike, *, warn=None) -> Database:
+def load_database(path: str | os.PathLike, *, warn=None, fields: bool = True) -> Database:
     """Load a database built by :func:`build_database`.
 
     ``warn`` (a callable taking one line) is told about models whose source
-    file has changed since the database was built.
+    file has changed since the database was built.  Without ``fields`` the
+    meshes' distance fields are not kept (a cluster's client: its workers
+    read them, :mod:`tactrec.cluster`), and reading one is an error.
     """
     db = Path(path)
     index = _read_index(db)
     entries = []
     for item in index["models"]:
-        entries.append(_load_entry(db, item))
+        entries.append(_load_entry(db, item, fields=fields))
         src = Path(item["source"])
         if warn is not None and not item.get("builtin") and src.is_file() and file_sha256(src) != item["source_sha256"]:
             warn(f"{src}: changed since the database was built; run 'tactrec build' to update {db}")
@@ -267,7 +276,7 @@ def _write_index(out: Path, items: list[dict], *, complete: bool) -> None:
 
 
 def build_database(models: Iterable, out: str | os.PathLike, *, quiet: bool = False, units: str | None = None,
-                   scale: float | None = None, tips: Iterable[float] = ()) -> BuildReport:
+                   scale: float | None = None, tips: Iterable[float] = (), cluster=None) -> BuildReport:
     """Build (or update) the database ``out`` from model files or built-in names.
 
     Models whose source file, options (``units``, ``scale`` of mesh files,
@@ -275,7 +284,9 @@ def build_database(models: Iterable, out: str | os.PathLike, *, quiet: bool = Fa
     rebuilt.  The database afterwards holds exactly ``models``.  ``tips``:
     radii of round tips (the meshes' units) whose offset fields each mesh
     stores (:mod:`tactrec.surfaces.mesh_offset`), so that touches of such a
-    tip are searched without building them first.
+    tip are searched without building them first.  With ``cluster``
+    (:func:`tactrec.cluster.connect`) the models are built as tasks on its
+    workers and written here as they come: the same files, to the byte.
     """
     tips = sorted({float(r) for r in tips})
     if not all(np.isfinite(r) and r > 0 for r in tips):
@@ -320,7 +331,8 @@ def build_database(models: Iterable, out: str | os.PathLike, *, quiet: bool = Fa
     # seconds: a stopped build of a large catalogue resumes where it stopped
     written = time.monotonic()
     # closed at once where a write fails, which ends its workers
-    with contextlib.closing(_stored(models, todo, quiet=quiet, tips=tips)) as stored:
+    made = _stored if cluster is None else cluster.stored
+    with contextlib.closing(made(models, todo, quiet=quiet, tips=tips)) as stored:
         for done, (k, blob, rows) in enumerate(stored, 1):
             src, model, sha, options, _, _ = plans[k]
             name = f"{_safe(model.name)}-{sha[:16]}.npz"
@@ -332,7 +344,7 @@ def build_database(models: Iterable, out: str | os.PathLike, *, quiet: bool = Fa
                 "table_rows": rows, "table_version": TABLE_VERSION, "store_version": STORE_VERSION,
                 "builtin": src.builtin,
             }
-            built.append(model.name)
+            built.append(k)
             if done < len(todo) and time.monotonic() - written > INDEX_EVERY:
                 _write_index(out, [items[j] for j in sorted(items)], complete=False)
                 written = time.monotonic()
@@ -344,13 +356,14 @@ def build_database(models: Iterable, out: str | os.PathLike, *, quiet: bool = Fa
         if f.name not in keep:
             f.unlink()
             removed.append(f.name)
-    return BuildReport(out, built, reused, removed)
+    return BuildReport(out, [plans[k][1].name for k in sorted(built)], reused, removed)
 
 
-def open_models(*, db=None, models=None, warn=None, quiet: bool = True, units=None, scale=None) -> Database:
-    """A database from ``db`` (a folder) or built on the fly from ``models``."""
+def open_models(*, db=None, models=None, warn=None, quiet: bool = True, units=None, scale=None,
+                fields: bool = True) -> Database:
+    """A database from ``db`` (a folder; ``fields``: :func:`load_database`'s) or built from ``models``."""
     if db is not None:
-        return load_database(db, warn=warn)
+        return load_database(db, warn=warn, fields=fields)
     return build_entries(models, quiet=quiet, units=units, scale=scale)
 
 

@@ -20,6 +20,10 @@ Everything a request does is one call of the Python API: :meth:`Recognizer.recog
 the request's JSON is read by :func:`tactrec.io.touch.parse_touch` and
 :func:`tactrec.io.session.parse_session_touch`.
 
+On a cluster (``--cluster``), a request some of whose models could not be searched (their workers
+lost, none left to load them) gets ``{"id": ..., "error": "...", "unavailable": [models]}`` and
+the service ends (:class:`~tactrec.errors.ShardsUnavailable`; the command exits 3).
+
 A bad request gets ``{"id": ..., "error": "..."}`` and the service goes on: a request is checked
 before it changes anything, and a session's add that fails leaves the session as it was, so no
 request reaches another session.  A line longer than :data:`MAX_LINE` bytes is refused unread.
@@ -31,7 +35,7 @@ import json
 
 import numpy as np
 
-from .errors import InputError
+from .errors import InputError, ShardsUnavailable
 from .io.meeting import check_meeting
 from .io.session import SessionMiss, parse_session_touch
 from .io.touch import parse_touch, read_json
@@ -86,6 +90,9 @@ class Service:
             out = self.request(obj, source=source)
         except InputError as exc:
             return {"id": ident, "error": str(exc)}
+        except ShardsUnavailable as exc:          # a cluster's models that could not answer: the service ends
+            exc.answer = {"id": ident, "error": f"{source}: {exc}", "unavailable": exc.models}
+            raise
         except UnicodeDecodeError:
             return {"id": ident, "error": f"{source}: not UTF-8 text"}
         except (ValueError, TypeError, OverflowError, ArithmeticError) as exc:
@@ -178,7 +185,12 @@ def serve(recognizer, stdin, stdout, *, seed: int = 0) -> int:
         elif not line.strip():
             continue
         else:
-            out = service.answer(line)
+            try:
+                out = service.answer(line)
+            except ShardsUnavailable as exc:          # answered, naming the models; then the service ends
+                stdout.write(json.dumps(exc.answer) + "\n")
+                stdout.flush()
+                raise
         try:
             text = json.dumps(out, allow_nan=False)
         except ValueError:                            # a number JSON cannot carry: never a line a client cannot read

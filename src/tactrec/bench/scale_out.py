@@ -16,7 +16,15 @@ mesh.  Each size runs in its own :class:`~tactrec.recognition.Recognizer`
 Reported per size: top-1 and top-3 over the touches, how many wrong answers
 name a near twin of the touched mesh (its own family: counted wrong, and
 shown on its own), median / p95 / max seconds, and the peak resident memory
-of this process and of its largest worker.
+of this process and of its largest worker during that size's run.
+
+With ``--cluster local:1,local:2`` (any comma-separated cluster addresses,
+:mod:`tactrec.cluster`) the same touches are first recognised on each
+cluster, a ``local:N`` one started afresh for each size, this process its
+client and holding the models without their distance fields (as
+``--cluster`` commands do): the same columns, how many answers are those of
+the one process to the byte (their JSON, timings aside), and the peak
+resident memory of the client and of each worker.
 """
 
 from __future__ import annotations
@@ -37,24 +45,44 @@ SIZES = (78, 250, 1078)
 GENERATED = 1000
 
 
-def catalogue_entries(count: int = GENERATED, *, seed: int = 0, quiet: bool = True):
-    """The first ``count`` generated meshes (seed ``seed``) with their tables, built once into the
-    cache folder (a stopped build resumes) and loaded."""
-    from ..database import build_database, cache_folder, load_database
+def catalogue_folder(count: int = GENERATED, *, seed: int = 0, quiet: bool = True) -> Path:
+    """The database of the first ``count`` generated meshes (seed ``seed``), built once into the cache
+    folder (a stopped build resumes)."""
+    from ..database import build_database, cache_folder
     from .catalogue import generate
     from .common import default_jobs
 
     paths = generate(cache_folder() / "catalogue", count=count, seed=seed, jobs=default_jobs(), quiet=quiet)
     folder = cache_folder() / f"catalogue-db-{paths[0].parent.name}-{count}"
     build_database(paths, folder, units="mm", quiet=quiet)
-    return load_database(folder).entries
+    return folder
 
 
-def _peak_mb() -> tuple[float, float]:
-    """Peak resident memory (MB) of this process and of its largest child that has ended."""
-    own = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
-    children = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024.0
-    return own, children
+def catalogue_entries(count: int = GENERATED, *, seed: int = 0, quiet: bool = True, fields: bool = True):
+    """The first ``count`` generated meshes (seed ``seed``) with their tables (:func:`catalogue_folder`),
+    loaded (``fields``: :func:`tactrec.database.load_database`'s)."""
+    from ..database import load_database
+
+    return load_database(catalogue_folder(count, seed=seed, quiet=quiet), fields=fields).entries
+
+
+def _reset_peak() -> None:
+    """Start this process's peak resident memory again from what it holds now (Linux's
+    ``/proc/self/clear_refs``), so that each run's peak is its own (elsewhere it is the peak so far)."""
+    try:
+        with open("/proc/self/clear_refs", "w") as handle:
+            handle.write("5")
+    except OSError:
+        pass
+
+
+def _peak(pid: int | str = "self") -> float:
+    """The peak resident memory (MB) of process ``pid`` (``VmHWM``), else of this one so far."""
+    try:
+        with open(f"/proc/{pid}/status") as handle:
+            return next(int(line.split()[1]) for line in handle if line.startswith("VmHWM:")) / 1024.0
+    except (OSError, StopIteration, ValueError):
+        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
 def place_rank(index, touch, size: int, k: int, model, vertex: int) -> int | None:
@@ -77,11 +105,13 @@ def place_rank(index, touch, size: int, k: int, model, vertex: int) -> int | Non
 
 
 def _outcome(rec, name: str, family, place: int | None) -> dict:
+    from .answers import digest, without_timings
+
     ok = [r.model for r in rec.ranking if r.ok]
     twin = rec.best not in (None, name) and family(name) is not None and family(rec.best) == family(name)
     return {"model": name, "recognized": rec.best, "rank": ok.index(name) + 1 if name in ok else None,
             "twin": bool(twin), "seconds": rec.seconds, "ambiguous": rec.ambiguous, "settled": rec.settled,
-            "place_rank": place}
+            "place_rank": place, "answer": digest(without_timings(rec.to_json()))}
 
 
 def _summary(rows: list[dict]) -> dict:
@@ -101,38 +131,95 @@ def _summary(rows: list[dict]) -> dict:
             "place_in_first_round_percent": 100.0 * float(np.mean(places <= FastConfig.index_round))}
 
 
-def run(*, out, instances: int = 20, seed: int = 0, jobs: int | None = None, quiet: bool = False,
-        **_ignored) -> dict:
-    from ..features import Touch
-    from ..recognition import Recognizer, default_workers
-    from .catalogue import family_of
-    from .common import ycb_database
-
-    out = Path(out)
-    scans = ycb_database().entries
-    generated = catalogue_entries(GENERATED, quiet=quiet)
-    entries = list(scans) + list(generated)
+def _touches(scans, generated, instances: int, seed: int) -> tuple[list[int], dict]:
+    """The touched models (indices into the scans then the generated meshes) and their P3 touches, each
+    ``(vertex, data)``."""
     rng = instance_rng(seed, 1_078)
     on_scans = [int(i) for i in rng.choice(len(scans), size=min(instances, len(scans)), replace=False)]
     on_generated = [len(scans) + int(i) for i in rng.choice(len(generated), size=min(instances, len(generated)),
                                                              replace=False)]
-    touches = {k: vertex_touch(entries[k], k, 0, seed) for k in on_scans + on_generated}
-    table = {"benchmark": "scale-out", "seed": seed, "instances": instances, "sizes": {}}
+    entries = list(scans) + list(generated)
+    return on_scans + on_generated, {k: vertex_touch(entries[k], k, 0, seed) for k in on_scans + on_generated}
+
+
+def _size(recognizer, entries, size: int, touched: list[int], touches: dict, scans: int) -> dict:
+    """One catalogue size's rows and summaries, ``recognizer`` recognising each touch (and its index
+    ranking each touch's true place: :func:`place_rank`)."""
+    from ..features import Touch
+    from .catalogue import family_of
+
+    chosen = [k for k in touched if k < size]
+    rows = []
+    for k in chosen:
+        vertex, data = touches[k]
+        place = place_rank(recognizer.index, Touch.from_data(data), size, k, entries[k].model, vertex)
+        rows.append(_outcome(recognizer.recognize(data), entries[k].name, family_of, place))
+    return {"all": _summary(rows), "scans": _summary([r for r, k in zip(rows, chosen) if k < scans]),
+            "generated": _summary([r for r, k in zip(rows, chosen) if k >= scans]), "records": rows}
+
+
+def _on_cluster(address: str, entries, size: int, touched, touches, scans: int) -> dict:
+    """:func:`_size` on the cluster ``address`` (a new one per size for ``local:N``), this process its
+    client, holding the models without their distance fields; the client's and each worker's peak
+    resident memory."""
+    from ..cluster import connect
+    from ..recognition import Recognizer
+
+    _reset_peak()
+    with connect(address) as cluster:
+        with Recognizer(entries[:size], cluster=cluster) as recognizer:
+            out = _size(recognizer, entries, size, touched, touches, scans)
+        workers = cluster.peak_mb()
+    out["peak_mb"] = {"client": _peak(), "workers": list(workers.values())}
+    return out
+
+
+def run(*, out, instances: int = 20, seed: int = 0, jobs: int | None = None, quiet: bool = False,
+        cluster: str | None = None, **_ignored) -> dict:
+    """The benchmark (module text); ``cluster``: comma-separated cluster addresses (``local:1,local:2``),
+    each run too, before the one process (its client holding the models without their fields)."""
+    from ..database import build_database, cache_folder, load_database
+    from ..recognition import Recognizer, default_workers
+    from .common import ycb_database
+
+    out = Path(out)
+    addresses = [a for a in (cluster or "").split(",") if a]
+    table = {"benchmark": "scale-out", "seed": seed, "instances": instances, "sizes": {}, "clusters": {}}
+    touched = None
+    if addresses:
+        build_database(("ycb",), cache_folder() / "ycb", quiet=quiet)
+        scans = load_database(cache_folder() / "ycb", fields=False).entries
+        generated = catalogue_entries(GENERATED, quiet=quiet, fields=False)
+        touched, touches = _touches(scans, generated, instances, seed)
+        for address in addresses:
+            table["clusters"][address] = {str(size): _on_cluster(address, scans + generated, size, touched, touches,
+                                                                 len(scans)) for size in SIZES}
+        del scans, generated
+    scans = ycb_database().entries
+    generated = catalogue_entries(GENERATED, quiet=quiet)
+    entries = list(scans) + list(generated)
+    if touched is None:
+        touched, touches = _touches(scans, generated, instances, seed)
     for size in SIZES:
-        chosen = [k for k in on_scans + on_generated if k < size]
+        _reset_peak()
         with Recognizer(entries[:size], workers=default_workers()) as recognizer:
-            rows = []
-            for k in chosen:
-                vertex, data = touches[k]
-                place = place_rank(recognizer.index, Touch.from_data(data), size, k, entries[k].model, vertex)
-                rows.append(_outcome(recognizer.recognize(data), entries[k].name, family_of, place))
-        own, worker = _peak_mb()
-        table["sizes"][str(size)] = {
-            "all": _summary(rows), "scans": _summary([r for r, k in zip(rows, chosen) if k < len(scans)]),
-            "generated": _summary([r for r, k in zip(rows, chosen) if k >= len(scans)]),
-            "peak_mb": {"process": own, "largest_worker": worker}, "records": rows}
+            row = _size(recognizer, entries, size, touched, touches, len(scans))
+            pool = getattr(recognizer.runner, "pool", None)
+            workers = [_peak(pid) for pid in (pool.pids if pool is not None else [])]
+        row["peak_mb"] = {"process": _peak(), "largest_worker": max(workers, default=0.0)}
+        table["sizes"][str(size)] = row
+    for runs in table["clusters"].values():
+        for size, row in runs.items():
+            one = [r["answer"] for r in table["sizes"][size]["records"]]
+            row["same_answers"] = int(sum(r["answer"] == a for r, a in zip(row["records"], one)))
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / "scale-out.json", table)
+    table["text"] = _text(table, seed, instances)
+    (out / "scale-out.md").write_text(table["text"] + "\n", encoding="utf-8")
+    return table
+
+
+def _text(table: dict, seed: int, instances: int) -> str:
     lines = [f"P3 touches (seed {seed}): {instances} on YCB scans, {instances} on generated meshes, one process "
              "and its two workers per catalogue size", "",
              "| models | touches | top-1 | top-3 | near-twin confusions | median s | p95 s | max s | "
@@ -145,6 +232,15 @@ def run(*, out, instances: int = 20, seed: int = 0, jobs: int | None = None, qui
                      f"{a['max_seconds']:.2f} | {y['median_seconds']:.2f} | {a['place_rank_median']:.0f} / "
                      f"{a['place_rank_p90']:.0f} / {a['place_in_first_round_percent']:.0f}% | {m['process']:.0f} / "
                      f"{m['largest_worker']:.0f} |")
-    table["text"] = "\n".join(lines)
-    (out / "scale-out.md").write_text(table["text"] + "\n", encoding="utf-8")
-    return table
+    for address, runs in table["clusters"].items():
+        lines += ["", f"On the cluster {address} (this process its client, holding the models without their "
+                      "distance fields):", "",
+                  "| models | touches | top-1 | top-3 | median s | p95 s | max s | same answers as one process | "
+                  "peak MB (client / each worker) |", "|---|---|---|---|---|---|---|---|---|"]
+        for size, s in runs.items():
+            a, m = s["all"], s["peak_mb"]
+            lines.append(f"| {size} | {a['touches']} | {a['top1_percent']:.1f}% | {a['top3_percent']:.1f}% | "
+                         f"{a['median_seconds']:.2f} | {a['p95_seconds']:.2f} | {a['max_seconds']:.2f} | "
+                         f"{s['same_answers']} of {a['touches']} | {m['client']:.0f} / "
+                         f"{' + '.join(f'{w:.0f}' for w in m['workers'])} |")
+    return "\n".join(lines)

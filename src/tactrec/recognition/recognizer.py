@@ -42,10 +42,13 @@ __all__ = ["Recognizer", "recognize", "ModelEntry", "check_scale", "OFF_SCALE"]
 
 @dataclasses.dataclass(frozen=True)
 class ModelEntry:
-    """A model with its lookup table, ready for recognition."""
+    """A model with its lookup table, ready for recognition; ``stored``, where it was loaded from a
+    database, is that folder and the model's entry in its index (what a cluster's workers load:
+    :mod:`tactrec.cluster`)."""
 
     model: object
     table: CurvatureTable
+    stored: tuple | None = dataclasses.field(default=None, compare=False, repr=False)
 
     @property
     def name(self) -> str:
@@ -103,6 +106,12 @@ class Recognizer:
         Radii of round tips (the models' units) whose offset fields every mesh prepares now, before
         the workers fork (:mod:`tactrec.surfaces.mesh_offset`: read from the stored fields up to
         10 mm, built beyond), so that no recognition reads or builds them.
+    cluster : tactrec.cluster.Cluster, optional
+        Run the stages on a Dask cluster's workers instead (:func:`tactrec.cluster.connect`; the
+        models must come from a database, whose files the workers load and prepare, ``tips``
+        included): the same results, and this process prepares no model (it may hold them
+        without their distance fields: :func:`tactrec.database.load_database`).  ``workers`` is
+        then unused.
     **options
         The method's options (its :class:`~tactrec.methods.base.Config`); a name it does not
         know is an :class:`~tactrec.errors.InputError`.
@@ -110,7 +119,8 @@ class Recognizer:
 
     def __init__(self, models: Iterable[ModelEntry], *, method: str = DEFAULT_METHOD, workers: int = 1,
                  window: int | str | None = "auto", degree: int = 3, curvature_method: str = "auto",
-                 unknown_prior: float = UNKNOWN_PRIOR, chance=None, tips: Iterable[float] = (), **options):
+                 unknown_prior: float = UNKNOWN_PRIOR, chance=None, tips: Iterable[float] = (), cluster=None,
+                 **options):
         if not (isinstance(unknown_prior, (int, float)) and 0.0 <= unknown_prior < 1.0):
             raise InputError(f"the prior of unknown must be a number in [0, 1), not {unknown_prior!r}", "unknown_prior")
         self.unknown_prior = float(unknown_prior)
@@ -126,11 +136,11 @@ class Recognizer:
         tips = tuple(float(r) for r in tips)
         if not all(np.isfinite(r) and r > 0 for r in tips):
             raise InputError(f"a tip radius is a positive number (got {tips})", "tips")
-        for entry in self.models:
+        for entry in self.models if cluster is None else ():     # on a cluster, its workers prepare their shards
             self.method.prepare(entry.model)
             for r in tips if entry.model.kind == "mesh" else ():
                 entry.model.offset(float(r)).distance_field
-        if self.method.uses_engine:
+        if self.method.uses_engine and cluster is None:
             from ..engine.kernels import warm
 
             warm()         # compiled or loaded now, not in a recognition's seconds; forked workers inherit it
@@ -140,6 +150,9 @@ class Recognizer:
             from ..index import PlaceIndex
 
             self.index = PlaceIndex(self.models)
+        if cluster is not None:
+            self.runner = cluster.runner(self.models, method=self.method.name, tips=tips)
+            return
         held = Held(self.models)
         self.runner = Pool(held, int(workers)) if int(workers) >= 2 and can_fork() else Serial(held)
 
@@ -150,8 +163,8 @@ class Recognizer:
         self.close()
 
     def close(self) -> None:
-        """End the worker processes."""
-        if isinstance(self.runner, Pool):
+        """End the worker processes (on a cluster: let its workers forget these models)."""
+        if hasattr(self.runner, "close"):
             self.runner.close()
 
     def session(self, **options):

@@ -29,7 +29,7 @@ from typing import ClassVar
 
 import numpy as np
 
-__all__ = ["DistanceField", "build_field", "SPACING", "BAND"]
+__all__ = ["DistanceField", "FieldsElsewhere", "build_field", "SPACING", "BAND"]
 
 #: grid spacing as a multiple of the mesh's mean edge
 SPACING = 0.35
@@ -191,3 +191,30 @@ def build_field(vertices: np.ndarray, faces: np.ndarray, *, mean_edge: float, sp
     index[blocks[:, 0], blocks[:, 1], blocks[:, 2]] = np.arange(len(blocks), dtype=np.int32)
     bricks = np.round(d * (_Q / truncation)).astype(np.int16).reshape((len(blocks),) + (BRICK + 1,) * 3)
     return DistanceField(np.ascontiguousarray(origin), h, truncation, index, bricks)
+
+
+class FieldsElsewhere:
+    """In place of a mesh's stored arrays where its distance fields are read elsewhere (a cluster's
+    workers; :func:`tactrec.database.load_database` without ``fields``): reading a field here
+    (``field_*``, ``outer_*``, ``offset*``) is an error, never a silent rebuild.  It keeps the other
+    arrays, but for those the mesh and its table already hold (``mesh_*``, ``table_*``)."""
+
+    FIELDS = ("field_", "outer_", "offset")
+
+    def __init__(self, arrays, source):
+        self.source = source
+        held = self.FIELDS + ("mesh_", "table_")
+        self.kept = {k: np.asarray(arrays[k]) for k in arrays.files if not k.startswith(held)}
+
+    def _check(self, key) -> None:
+        if str(key).startswith(self.FIELDS):
+            raise RuntimeError(f"{self.source}: loaded without its distance fields (the cluster's workers read "
+                               f"them), yet {key} was read here")
+
+    def __contains__(self, key) -> bool:
+        self._check(key)
+        return key in self.kept
+
+    def __getitem__(self, key):
+        self._check(key)
+        return self.kept[key]
