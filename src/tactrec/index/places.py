@@ -15,7 +15,7 @@ import dataclasses
 
 import numpy as np
 
-from ..linalg import stable_order
+from ..linalg import stable_prefix
 from ..surfaces.mesh_rings import FEATURES, touch_rings
 
 __all__ = ["PlaceIndex", "Ranked"]
@@ -62,8 +62,9 @@ class PlaceIndex:
         return bool(np.any(np.isfinite(touch_rings(touch, 1))))
 
     def _distances(self, touch, among) -> tuple:
-        """The rows of the models ``among`` and each one's distance to ``touch``'s rings and side of the
-        normal (the least over the touch's :attr:`~tactrec.features.Touch.sides`); kept for the touch."""
+        """The rows of the models ``among`` (each model's contiguous, in the table's order), each
+        one's distance to ``touch``'s rings and side of the normal (the least over the touch's
+        :attr:`~tactrec.features.Touch.sides`); kept for the touch."""
         chosen = np.asarray(sorted(among), dtype=np.int64)
         key = (touch.key, chosen.tobytes())
         if key not in self._ranked:
@@ -77,26 +78,31 @@ class PlaceIndex:
                     d += (self.features[rows, j].astype(np.float64) - wanted[j]) ** 2
                 side = np.where(d < best, np.int8(sign), side)
                 best = np.minimum(best, d)
-            self._ranked = {key: (rows, best, side, stable_order(best))}
+            self._ranked = {key: (rows, best, side)}
         return self._ranked[key]
 
     def _of(self, rows, best, side, order) -> Ranked:
         r = rows[order]
         return Ranked(self.owner[r].astype(np.int64), self.vertex[r], side[order].astype(np.int64), best[order])
 
+    @staticmethod
+    def _first(best: np.ndarray, count: int) -> np.ndarray:
+        """``stable_order(best)[:count]``, without sorting the rest (:func:`tactrec.linalg.stable_prefix`)."""
+        return stable_prefix(best, count)[:count] if count >= 1 and len(best) else np.zeros(0, dtype=np.int64)
+
     def ranked(self, touch, among, count: int) -> Ranked:
         """The ``count`` places of the models ``among`` (indices) nearest ``touch``'s rings, best
         first, over the normals the touch may have (:attr:`~tactrec.features.Touch.sides`)."""
-        rows, best, side, order = self._distances(touch, among)
-        return self._of(rows, best, side, order[:int(count)])
+        rows, best, side = self._distances(touch, among)
+        return self._of(rows, best, side, self._first(best, int(count)))
 
     def each_best(self, touch, among, count: int) -> Ranked:
         """Each model's own ``count`` places nearest ``touch``'s rings (of the models ``among``), by
-        model, each model's best first."""
-        rows, best, side, order = self._distances(touch, among)
-        owner = self.owner[rows[order]]
-        by_model = order[np.argsort(owner, kind="stable")]              # by model, each in the ranking's order
-        grouped = self.owner[rows[by_model]]
-        start = np.r_[0, np.flatnonzero(np.diff(grouped)) + 1]
-        position = np.arange(len(by_model)) - np.repeat(start, np.diff(np.r_[start, len(by_model)]))
-        return self._of(rows, best, side, by_model[position < int(count)])
+        model, each model's best first: the ranking's order within each model, which a band of
+        near-equal distances orders by row alone."""
+        rows, best, side = self._distances(touch, among)
+        owner = self.owner[rows]
+        start = np.r_[0, np.flatnonzero(np.diff(owner)) + 1]
+        ends = np.r_[start[1:], len(rows)]
+        order = [a + self._first(best[a:b], int(count)) for a, b in zip(start, ends) if b > a]
+        return self._of(rows, best, side, np.concatenate(order) if order else np.zeros(0, dtype=np.int64))

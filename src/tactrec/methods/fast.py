@@ -136,6 +136,7 @@ from ..registration import mesh_fast
 from ..registration.result import Outcome, Registration
 from .base import NOT_SEARCHED, SearchOutcome
 from .fast_config import TIERS, FastConfig, Tier
+from .fast_index import IndexedTier, indexed_stage, round_cost
 from .fast_stages import (cheap_stage, closed_form_stage, field_stages, hop_cost, polish_stage, refine_stage,
                           tier_span)
 from .fast_state import State, error_of, grid_leaders, tier_places
@@ -219,8 +220,6 @@ class FastMethod:
 
         indexed = None                              # the indexed tier's rounds, where the index reads the touch
         if index is not None and meshes and any(t.indexed for t in config.tiers) and index.reads(touch):
-            from .fast_index import IndexedTier
-
             indexed = IndexedTier(index, touch, meshes, config, next(k for k, t in enumerate(config.tiers) if t.indexed))
 
         while True:
@@ -246,8 +245,6 @@ class FastMethod:
                 group = [i for i in group if i not in finished]
                 if not group:
                     continue
-                from .fast_index import round_cost
-
                 spots = indexed.next_round(group)
                 cost = round_cost(config, spots, len(touch.curves), len(touch.context))
                 if work > 0 and work * share + cost + polish > allowed:
@@ -292,8 +289,6 @@ class FastMethod:
         if spots is None:
             cheap = dict(zip(group, runner.map(cheap_stage, group, touch, config, k)))
         else:
-            from .fast_index import indexed_stage
-
             cheap = dict(zip(group, runner.map(indexed_stage, group, touch, config, k, items=[spots[i] for i in group])))
         work = sum(c.queries for c in cheap.values())
         posed = {i: c.poses for i, c in cheap.items() if c.outcome is Outcome.FITTED}

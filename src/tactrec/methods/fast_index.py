@@ -29,10 +29,9 @@ from __future__ import annotations
 import numpy as np
 
 from ..engine import LOOKUP_COST
-from ..linalg import stable_order
 from ..registration.result import Outcome
 from .common import in_model_units
-from .fast_stages import Cheap, Poses, field_poses, touch_gaps
+from .fast_stages import OVERSIZED, Cheap, field_poses, fitted, oversized, touch_gaps
 
 __all__ = ["IndexedTier", "indexed_stage", "round_cost"]
 
@@ -46,6 +45,9 @@ class IndexedTier:
         self.floor = index.each_best(touch, meshes, config.index_floor)
         self.done = np.zeros(len(self.ranked), dtype=bool)
         self.rounds = 0
+        size = max(meshes) + 1
+        self._floored = np.bincount(self.floor.model, minlength=size) > 0
+        self._left = np.bincount(self.ranked.model, minlength=size)      # each model's places not yet screened
 
     @staticmethod
     def _keys(ranked) -> np.ndarray:
@@ -54,7 +56,7 @@ class IndexedTier:
     def left(self, i: int) -> bool:
         """Whether model ``i`` has places not yet screened: its own best before the first round, or
         places of the ranking."""
-        return bool((self.rounds == 0 and np.any(self.floor.model == i)) or np.any((self.ranked.model == i) & ~self.done))
+        return bool((self.rounds == 0 and self._floored[i]) or self._left[i] > 0)
 
     def next_round(self, group: list[int]) -> dict[int, dict[int, np.ndarray]]:
         """The next round's places of the models ``group``: per model, per side of the normal, its
@@ -70,6 +72,7 @@ class IndexedTier:
             self.done |= np.isin(self._keys(self.ranked), self._keys(floor)[np.isin(floor.model, group)])
         self.done[take] = True
         self.rounds += 1
+        self._left = np.bincount(self.ranked.model[~self.done], minlength=len(self._left))
         out: dict[int, dict[int, np.ndarray]] = {}
         for i in np.unique(model):
             mine = model == i
@@ -102,8 +105,8 @@ def indexed_stage(held, indices, touch, config, k: int, spots: list[dict[int, np
     for index, sides in zip(indices, spots):
         model = held.entries[index].model
         t = in_model_units(touch, model)
-        if t.radius > model.size or t.joint_reach > model.size:
-            out.append(Cheap(Outcome.REJECTED, 0, reason="the touch is larger than the model"))
+        if oversized(t, model):
+            out.append(OVERSIZED)
             continue
         x = t.joint_subset(config.coarse_points)
         exact = t.exact(model, config.coarse_points)
@@ -123,9 +126,6 @@ def indexed_stage(held, indices, touch, config, k: int, spots: list[dict[int, np
         if not poses:
             out.append(Cheap(Outcome.NOT_SEARCHED, int(queries), tried))
             continue
-        R, tr, score, signs = (np.concatenate([p[i] for p in poses]) for i in range(4))
-        keep = stable_order(score)[:config.refine]
-        out.append(Cheap(Outcome.FITTED, int(queries), tried, Poses(R[keep], tr[keep], score[keep] / t.scale,
-                                                                       signs[keep])))
+        out.append(fitted(poses, config, t, queries, tried))
     return out
 

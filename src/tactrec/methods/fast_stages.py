@@ -181,6 +181,23 @@ def field_poses(model, s, g, sign: int, spots: np.ndarray, fit, tier, config: Fa
     return R, tr, score, int(lookups * LOOKUP_COST) + q, tried
 
 
+#: a model ruled out for a touch that does not fit on it (:func:`oversized`)
+OVERSIZED = Cheap(Outcome.REJECTED, 0, reason="the touch is larger than the model")
+
+
+def oversized(t, model) -> bool:
+    """Whether the touch ``t`` (in ``model``'s units) reaches farther than the model is across."""
+    return bool(t.radius > model.size or t.joint_reach > model.size)
+
+
+def fitted(poses: list[tuple], config: FastConfig, t, queries: int, tried: int) -> Cheap:
+    """Step 1's outcome on a model from its hypotheses ``poses`` (``(R, t, score, sign)`` each, model
+    units): its best ``refine`` poses and their cheap scores in the data's units."""
+    R, tr, score, signs = (np.concatenate([p[i] for p in poses]) for i in range(4))
+    keep = stable_order(score)[:config.refine]
+    return Cheap(Outcome.FITTED, int(queries), tried, Poses(R[keep], tr[keep], score[keep] / t.scale, signs[keep]))
+
+
 def cheap_stage(held, indices, touch, config: FastConfig, k: int) -> list[Cheap]:
     """Step 1 of tier ``k`` on each mesh model: its best ``refine`` poses and their cheap scores."""
     tier = config.tiers[k]
@@ -188,8 +205,8 @@ def cheap_stage(held, indices, touch, config: FastConfig, k: int) -> list[Cheap]
     for index in indices:
         model = held.entries[index].model
         t = in_model_units(touch, model)
-        if t.radius > model.size or t.joint_reach > model.size:
-            out.append(Cheap(Outcome.REJECTED, 0, reason="the touch is larger than the model"))
+        if oversized(t, model):
+            out.append(OVERSIZED)
             continue
         x, screened = t.joint_subset(config.coarse_points), t.screen_subset(config.coarse_points)
         exact, exact_screened = t.exact(model, config.coarse_points), t.exact(model, config.coarse_points, screen=True)
@@ -235,10 +252,7 @@ def cheap_stage(held, indices, touch, config: FastConfig, k: int) -> list[Cheap]
         if not poses:
             out.append(Cheap(Outcome.REJECTED, int(queries), tried, reason="no place to start from"))
             continue
-        R, tr, score, signs = (np.concatenate([p[i] for p in poses]) for i in range(4))
-        keep = stable_order(score)[:config.refine]
-        out.append(Cheap(Outcome.FITTED, int(queries), tried, Poses(R[keep], tr[keep], score[keep] / t.scale,
-                                                                       signs[keep])))
+        out.append(fitted(poses, config, t, queries, tried))
     return out
 
 
