@@ -177,14 +177,18 @@ def build_field(vertices: np.ndarray, faces: np.ndarray, *, mean_edge: float, sp
     near, _, _ = igl.point_mesh_squared_distance(centre, vertices, faces)
     blocks = blocks[np.abs(np.sqrt(np.asarray(near, dtype=np.float64)) - r) <= truncation + 0.5 * np.sqrt(3.0) * block
                     + 1e-9 * block]
-    steps = np.arange(BRICK + 1) * h
-    corner = origin + blocks * block                                                   # (k, 3)
+    # neighbouring bricks share their faces' samples: each lattice point is measured once
+    steps = np.arange(BRICK + 1)
     grid = np.stack(np.meshgrid(steps, steps, steps, indexing="ij"), axis=-1).reshape(-1, 3)
-    points = (corner[:, None, :] + grid[None]).reshape(-1, 3)
+    lattice = (blocks[:, None, :] * BRICK + grid[None]).reshape(-1, 3)                # (k (BRICK+1)^3, 3)
+    side = shape * BRICK + 1
+    lattice, at = np.unique((lattice[:, 0] * side[1] + lattice[:, 1]) * side[2] + lattice[:, 2], return_inverse=True)
+    lattice = np.stack([lattice // (side[1] * side[2]), (lattice // side[2]) % side[1], lattice % side[2]], axis=1)
+    points = origin + lattice * h
     d, _, _, _ = igl.signed_distance(points, vertices, faces, sign_type=igl.SIGNED_DISTANCE_TYPE_PSEUDONORMAL,
                                      upper_bound=reach * 1.000001)
     d = np.nan_to_num(np.asarray(d, dtype=np.float64), nan=reach, posinf=reach, neginf=-reach) - r
-    d = np.clip(d, -truncation, truncation).reshape(len(blocks), -1)
+    d = np.clip(d, -truncation, truncation)[at.reshape(-1)].reshape(len(blocks), -1)
     keep = np.min(np.abs(d), axis=1) < truncation
     blocks, d = blocks[keep], d[keep]
     index = np.full(tuple(shape), -1, dtype=np.int32)
