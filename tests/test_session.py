@@ -851,3 +851,40 @@ def test_sessions_that_never_touch_where_near_duplicates_differ_are_never_sure_o
                 assert result.confidence < 0.95, (k, truth, result.best, result.probabilities)
             h = result.hypothesis(twin)
             assert h is not None and all(h.consistent), (k, truth, twin)
+
+
+def test_a_later_touch_searches_the_standing_models_first_and_every_model_where_none_fits(small):
+    """A session on a catalogue: once its touches leave standing hypotheses (models whose joint pose
+    is consistent with every touch), a new touch is searched among their models only where one of
+    them fits it, and over every model where none does.  20 seeded sessions of two noisy touches
+    of the four meshes: wherever touch 1 left standing fewer models than all and touch 2 fits one, the
+    others were not searched for touch 2, and the sessions are right and sure on at least 19.  Then
+    a touch of the ring after two of the egg: no standing pose fits it, so its own search covers
+    every model and poses the ring."""
+    right, narrowed = 0, 0
+    with Recognizer(small) as recognizer:
+        for k in range(20):
+            entry = small[k % len(small)]
+            pose = random_rigid_motion(np.random.default_rng((40, k)), extent=300.0)
+            session = recognizer.session()
+            _add_touches(session, entry.model, pose, 1, 41 + 1000 * k)
+            standing = {h.model for h in session.result.ranking if all(h.consistent)}
+            _add_touches(session, entry.model, pose, 1, 42 + 1000 * k)
+            result, own = session.result, session.records[-1].own
+            right += result.best == entry.name and result.confidence >= 0.95
+            searched = {r.model for r in own.ranking if r.outcome is not Outcome.NOT_SEARCHED}
+            if standing and len(standing) < len(small) and any(r.ok and r.model in standing for r in own.ranking):
+                narrowed += 1
+                assert searched == standing, (k, searched, standing)
+        assert right >= 19, right
+        assert narrowed >= 10, f"only {narrowed} sessions searched their standing models first: the check is vacuous"
+        egg, ring = small[0], small[3]
+        pose = random_rigid_motion(np.random.default_rng((43,)), extent=300.0)
+        session = recognizer.session()
+        _add_touches(session, egg.model, pose, 2, 44)
+        assert {h.model for h in session.result.ranking if all(h.consistent)} == {egg.name}
+        touch = simulate_random_touch(ring.model, rng=np.random.default_rng((45,)), **NOISY)
+        session.add(touch, sensor_to_world(touch, pose))
+        own = session.records[-1].own
+        assert all(r.outcome is not Outcome.NOT_SEARCHED for r in own.ranking)
+        assert own.best == ring.name

@@ -74,7 +74,7 @@ class Add:
         data in the world frame; ``slipped``: the touches the result before it called slipped.
         Returns the session's result."""
         earlier = any(i not in slipped for i in range(len(self.touches)))
-        own = self.timed("own", self.recognizer.recognize, world)
+        own = self.timed("own", self._own, world, slipped)
         self.touches = self.touches.with_record(TouchRecord(given, world, own))
         self.searches.append(own)
         self.fit = JointFit(self.recognizer, self.touches, self.misses, self._joint, self.searches)
@@ -82,6 +82,28 @@ class Add:
         if joint_search and earlier and self.recognizer.method.scores_context:
             self._search_jointly(slipped, own.work)
         return self.result
+
+    # ------------------------------------------------------------------ step 1
+    def standing(self, slipped: set) -> list[str]:
+        """The models whose joint pose so far is consistent with every touch but those ``slipped``:
+        the hypotheses a later touch is searched among first (:meth:`_own`)."""
+        return [name for name, h in self._joint.items()
+                if h.consistent and all(c for i, c in enumerate(h.consistent) if i not in slipped)]
+
+    def _own(self, world, slipped: set):
+        """Step 1: the new touch's own recognition.  Once earlier touches leave standing hypotheses
+        (:meth:`standing`) that are not every model, it is searched among their models first, and
+        that search is its own where one of them fits it (the fit test, against its fit limit); else
+        the touch rules them all out and the whole catalogue is searched, that search its own (the
+        first one's seconds count in the add's ``own`` stage).  A session's later touches cost what
+        its standing models cost, not what the catalogue does."""
+        standing = self.standing(slipped)
+        if standing and len(standing) < len(self.recognizer.models):
+            first = self.recognizer.recognize(world, among=standing)
+            errors = [r.error / r.scale for r in first.ranking if r.ok]
+            if errors and fits(min(errors), fit_limit(first.touch, self.touches.floor), len(first.touch.points)):
+                return first
+        return self.recognizer.recognize(world)
 
     # ------------------------------------------------------------------ step 5
     def kept(self) -> list[int]:

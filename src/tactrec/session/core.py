@@ -7,7 +7,12 @@ refinement (more searches only in step 5):
 
 1. the touch, moved into the world frame by its ``sensor2world`` pose, is
    recognised on its own by the recognizer's method; each accepted model's
-   registration is then a world-to-model pose;
+   registration is then a world-to-model pose.  Once earlier touches leave
+   standing hypotheses (models whose joint pose is consistent with every
+   touch kept), it is searched among those models first, and over the whole
+   catalogue only where none of them fits it (the fit test of step 3 against
+   its fit limit): a later touch of a session on a large catalogue costs what
+   the standing models cost (:meth:`.add.Add.standing`);
 2. for every model, the candidate poses are its joint pose so far (with the
    poses along its free motions, where they were computed) and the new
    touch's poses on it (the best and the others its search refined); each is

@@ -77,7 +77,7 @@ class SessionResult(Answer):
     aside as off its curve's trace (:mod:`tactrec.outliers`); ``chance`` the database's null model
     of chance fits (:mod:`tactrec.chance`, None where it has none); ``searched`` the work and the
     most work allowed (closest-point queries; None: no limit) of each search the add ran, the
-    touch's own first, then step 5's.
+    touch's own first (:mod:`tactrec.session`, step 1), then step 5's.
     """
 
     ranking: list
