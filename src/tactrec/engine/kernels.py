@@ -128,6 +128,7 @@ def field_refine(index, bricks, origin, inv_h, quantum, truncation, shift, R, t,
 def warm() -> None:
     """Load every kernel's compiled code (from numba's cache, or compiling it) by calling each once on
     a tiny empty field, with the argument types and layouts a search passes."""
+    from ..index.kernels import ring_distances
     from ..registration.anderson import anderson
     from ..registration.step import covariance, jacobian, normal_matrix, plane_step, prior_steps
     from ..surfaces.field_kernels import field_gradient, field_lookup
@@ -148,3 +149,5 @@ def warm() -> None:
     prior_steps(np.eye(6), np.zeros((2, 2, 3)), np.zeros((2, 2, 3)), np.zeros((2, 2)), np.ones((2, 2)))
     anderson(eye, points, eye, points, eye, points, np.zeros((2, 4, 6)), np.zeros((2, 4, 6)), np.zeros(2, dtype=np.int64),
              1.0)
+    ring_distances(np.zeros((1, 2), dtype=np.float32), np.zeros(1, dtype=np.int64), np.zeros((1, 2)),
+                   np.ones(1, dtype=np.int8), np.zeros(1), np.zeros(1, dtype=np.int8))
