@@ -1,8 +1,8 @@
 """What every compiled kernel of the package shares: numba's threading layer.
 
 The kernels (:mod:`tactrec.surfaces.field_kernels`, :mod:`tactrec.registration.step`,
-:mod:`tactrec.registration.anderson`, :mod:`tactrec.engine.kernels`, :mod:`tactrec.index.kernels`) are compiled by numba, cached
-on disk, without ``fastmath``.  A :class:`~tactrec.recognition.Recognizer` forks its worker
+:mod:`tactrec.registration.anderson`, :mod:`tactrec.engine.kernels`, :mod:`tactrec.index.kernels`)
+are compiled by numba, cached on disk, without ``fastmath``.  A :class:`~tactrec.recognition.Recognizer` forks its worker
 processes after its kernels ran once, and GNU OpenMP, one of numba's default threading layers,
 ends a process forked after it ran.  So before any of them compiles, :func:`fork_safe` selects
 numba's own scheduler, ``workqueue`` (always present, safe across a fork), unless the user chose a
