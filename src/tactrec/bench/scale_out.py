@@ -152,8 +152,9 @@ def _size(recognizer, entries, size: int, touched: list[int], touches: dict, sca
     rows = []
     for k in chosen:
         vertex, data = touches[k]
+        found = recognizer.recognize(data)         # first: its seconds hold the index's pass over its places
         place = place_rank(recognizer.index, Touch.from_data(data), size, k, entries[k].model, vertex)
-        rows.append(_outcome(recognizer.recognize(data), entries[k].name, family_of, place))
+        rows.append(_outcome(found, entries[k].name, family_of, place))
     return {"all": _summary(rows), "scans": _summary([r for r, k in zip(rows, chosen) if k < scans]),
             "generated": _summary([r for r, k in zip(rows, chosen) if k >= scans]), "records": rows}
 
