@@ -6,8 +6,8 @@ touch's rings, for each normal it may have, are compared with every row on the f
 reaches (squared differences, summed); the rows are ranked by the least of those over the normals.
 The work per touch is one pass over the table (:mod:`.kernels`, on every core), about a tenth of a
 second for the five million places of a thousand meshes, against the field screen's work on every
-model's places.  Near-equal distances
-are ordered by row (:func:`tactrec.linalg.stable_order`), so the ranking is the same on every CPU.
+model's places.  Near-equal distances are ordered by row (:func:`tactrec.linalg.stable_order`), so
+the ranking is the same on every CPU.
 """
 
 from __future__ import annotations
@@ -75,11 +75,11 @@ class PlaceIndex:
             start, end = np.searchsorted(self.owner, chosen, "left"), np.searchsorted(self.owner, chosen, "right")
             size = end - start
             before = np.cumsum(size) - size                   # rows of the chosen models before each
-            rows = np.repeat(start - before, size) + np.arange(int(size.sum()))
+            rows = np.repeat(start - before, size) + np.arange(int(size.sum()), dtype=np.int64)
             signs = np.array([sign for sign, _ in touch.sides], dtype=np.int8)
             wanted = np.array([touch_rings(touch, int(sign)) for sign in signs], dtype=np.float64).reshape(-1, FEATURES)
             best, side = np.empty(len(rows)), np.empty(len(rows), dtype=np.int8)
-            ring_distances(self.features, rows.astype(np.int64), wanted, signs, best, side)
+            ring_distances(self.features, rows, wanted, signs, best, side)
             self._ranked = {key: (rows, best, side)}
         return self._ranked[key]
 
