@@ -6,8 +6,9 @@ are compiled by numba, cached on disk, without ``fastmath``.  A
 :class:`~tactrec.recognition.Recognizer` forks its worker processes after its kernels ran once,
 and GNU OpenMP, one of numba's default threading layers, ends a process forked after it ran.  So
 before any of them compiles, :func:`fork_safe` selects numba's own scheduler, ``workqueue`` (always
-present, safe across a fork), unless the user chose a layer (``NUMBA_THREADING_LAYER``).  It is the one setting the package makes of another library's
-state, and each kernel module calls it before it defines a kernel.
+present, safe across a fork), unless the user chose a layer (``NUMBA_THREADING_LAYER``).  It is the
+one setting the package makes of another library's state, and each kernel module calls it before it
+defines a kernel.
 """
 
 from __future__ import annotations
