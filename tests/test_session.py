@@ -349,13 +349,18 @@ def test_a_new_touch_whose_own_search_fitted_nothing_rules_no_model_out(small):
     """Step 5's models: two noisy touches of the egg.  The second touch's own errors rule out the
     models beyond its limits only while its own search fitted some model; once every model's own
     error is far beyond what its noise allows (a search that missed everywhere), every model whose
-    joint pose does not fit every touch is searched again, the ones it ruled out included."""
+    joint pose does not fit every touch is searched again, the ones it ruled out included.  The
+    second touch's own search is taken over every model (a session searches a later touch among
+    its standing models first), so that its errors have models to rule out."""
     import dataclasses
 
     entry = small[0]
     with Recognizer(small) as recognizer:
         session = recognizer.session()
         _add_touches(session, entry.model, random_rigid_motion(np.random.default_rng((14,)), extent=300.0), 2, 15)
+        whole = recognizer.recognize(session.records[-1].world)
+    records = session.records[:-1] + (dataclasses.replace(session.records[-1], own=whole),)
+    session.touches = dataclasses.replace(session.touches, records=records)
     slipped = set(session.result.slipped)
 
     def failing(name):
