@@ -359,9 +359,12 @@ def test_a_new_touch_whose_own_search_fitted_nothing_rules_no_model_out(small):
         session = recognizer.session()
         _add_touches(session, entry.model, random_rigid_motion(np.random.default_rng((14,)), extent=300.0), 2, 15)
         whole = recognizer.recognize(session.records[-1].world)
-    records = session.records[:-1] + (dataclasses.replace(session.records[-1], own=whole),)
-    session.touches = dataclasses.replace(session.touches, records=records)
     slipped = set(session.result.slipped)
+
+    def with_own(own):
+        """The session's touches, the last one's own search being ``own``."""
+        last = dataclasses.replace(session.records[-1], own=own)
+        return dataclasses.replace(session.touches, records=session.records[:-1] + (last,))
 
     def failing(name):
         h = session.result.hypothesis(name)
@@ -375,15 +378,14 @@ def test_a_new_touch_whose_own_search_fitted_nothing_rules_no_model_out(small):
         add.touches, add.result = touches, session.result
         return set(add.unexplained(slipped))
 
-    own = session.records[-1].own
-    limit = session.touches.limits()[-1]
-    searched = step_5(session.touches)
+    own, touches = whole, with_own(whole)
+    limit = touches.limits()[-1]
+    searched = step_5(touches)
     assert searched == {r.model for r in own.ranking if r.ok and r.error / r.scale <= limit and failing(r.model)}
     # the same touch as if its own search had missed everywhere: ten times every error
     missed = dataclasses.replace(own, ranking=[dataclasses.replace(r, error=10 * r.error) if r.ok else r
                                                 for r in own.ranking])
-    records = session.records[:-1] + (dataclasses.replace(session.records[-1], own=missed),)
-    widened = step_5(dataclasses.replace(session.touches, records=records))
+    widened = step_5(with_own(missed))
     deferred = {r.model for r in own.ranking if r.outcome is Outcome.DEFERRED}
     assert widened == {r.model for r in own.ranking if r.ok and failing(r.model)} | {m for m in deferred if failing(m)}
     assert searched <= widened
