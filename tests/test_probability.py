@@ -178,3 +178,43 @@ def test_evidence_keeps_its_resolution_through_json():
     old = found.to_json()
     del old["resolution"]
     assert Evidence.from_json(old).resolution == 0.0
+
+
+def test_models_an_unsettled_search_could_not_tell_apart_share_its_best_fit():
+    """An unsettled search's errors only bound each model's fit: two models read as tied share the
+    replicates and the fit test evenly, where read as fits the lower bound takes nearly all; a model
+    beyond the tie keeps its own reading; the tie is kept through JSON."""
+    from tactrec.probability import Evidence
+
+    rng = np.random.default_rng(5)
+    sizes = [41, 41, 41]
+    best = 0.0128 * (1.0 + 0.05 * rng.random(123))
+    twin, far = best * 0.0158 / 0.0128, best * 10.0
+    limits = (0.012,)
+    apart = evidence(["d", "c", "x"], [best, twin, far], sizes, limits=limits, resolution=0.012)
+    tied = evidence(["d", "c", "x"], [best, twin, far], sizes, limits=limits, resolution=0.012, tied=2)
+    assert apart.probabilities()[0] > 0.95
+    p = tied.probabilities()
+    assert p[0] == p[1] and p[0] < 0.5 and p[2] < 1e-6
+    back = Evidence.from_json(tied.to_json())
+    assert back.tied == 2 and np.allclose(back.probabilities(), p, atol=0.01)         # distances kept to 7 digits
+
+
+def test_a_search_cut_short_is_never_sure_between_models_within_its_ratio(scans):
+    """Hard touches on two scans, each search cut to its first round: of those that end unsettled
+    with the other model's error within the search's ratio (3) of the best, none comes back sure;
+    the answer is still the lowest error."""
+    from tactrec.bench.common import simulate
+
+    close = 0
+    with Recognizer(scans.entries[:2], budget=1) as recognizer:
+        for m_index, entry in enumerate(scans.entries[:2]):
+            for i in range(10):
+                _, touch = simulate(entry, m_index, i, 11, "hard")
+                r = recognizer.recognize(touch)
+                ok = [x for x in r.ranking if x.ok]
+                if r.settled or len(ok) < 2 or ok[1].error / ok[1].scale > 3.0 * ok[0].error / ok[0].scale:
+                    continue
+                close += 1
+                assert r.ambiguous and r.best == ok[0].model
+    assert close >= 3

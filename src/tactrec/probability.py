@@ -60,6 +60,19 @@ whose points lie beyond the resolution still loses to one within it, and
 noisy data, whose distances lie mostly beyond it, are read nearly as they
 are.
 
+An unsettled search.  A search that ended on its budget, its best beyond a
+fit, has found for each model the best pose it tried: an upper bound on the
+model's fit, not the fit.  Two such bounds order nothing: on a noise-free
+touch of a ring whose twin shares the touched surface, the search stopped at
+0.016 mm on the ring and 0.013 mm on its twin, both of which fit at 0, and
+the shares read the bounds as fits and called the twin sure.  So the models
+whose errors lie within the search's own ``ratio`` of the best (those its
+next round would have searched: :meth:`~tactrec.methods.fast_state.State.contending`)
+are *tied* (:attr:`Evidence.tied`): each is read at the best's distances, in
+the shares and in the fit test, and they share evenly what they take
+together.  The answer is still the lowest error of equals; how sure it is falls
+with every model the search could not tell from it.
+
 Nothing comes from a simulation setting: the scatter is the touch's own.
 The residuals are those of the points a touch kept: points off their
 curve's trace (:mod:`tactrec.outliers`) are no evidence for or against
@@ -246,6 +259,9 @@ class Evidence:
     radii : tuple of float
         Per touch, its radius (data units): with ``limits``, how much it resolves
         (:mod:`tactrec.chance`); empty where not recorded.
+    tied : int
+        How many of the models, best first, are read at the best's distances (module text, an
+        unsettled search): 1 where the search settled.
     """
 
     models: tuple
@@ -258,6 +274,7 @@ class Evidence:
     misses: np.ndarray | None = None
     resolution: float = 0.0
     radii: tuple = ()
+    tied: int = 1
 
     @property
     def block(self) -> int:
@@ -267,8 +284,20 @@ class Evidence:
 
     def shares(self, *, replicates: int = REPLICATES, rng=SEED) -> np.ndarray:
         """Each model's share of the bootstrap replicates it fits best in, ``(k,)`` (sum 1)."""
-        read = np.maximum(self.distances, self.resolution)          # nothing is read closer than the resolution
-        return bootstrap_probabilities(read, self.curve_sizes, block=self.block, replicates=replicates, rng=rng)
+        read = np.maximum(self.read, self.resolution)          # nothing is read closer than the resolution
+        shares = bootstrap_probabilities(read, self.curve_sizes, block=self.block, replicates=replicates, rng=rng)
+        if self.tied > 1:                                       # tied models share evenly, to the last digit
+            shares[:self.tied] = shares[:self.tied].sum() / self.tied
+        return shares
+
+    @property
+    def read(self) -> np.ndarray:
+        """The distances as the probabilities read them ``(k, m)``: the :attr:`tied` models' at the best's."""
+        if self.tied <= 1 or len(self.distances) < 2:
+            return self.distances
+        read = self.distances.copy()
+        read[1:self.tied] = read[0]
+        return read
 
     def touch_points(self) -> np.ndarray:
         """Points per touch ``(T,)``."""
@@ -287,7 +316,7 @@ class Evidence:
         bounds = np.concatenate([[0], np.cumsum(points)])
         z = np.empty((k, len(points)))
         for j, (limit, m) in enumerate(zip(self.limits, points)):
-            mean = self.distances[:, bounds[j]:bounds[j + 1]].sum(axis=1) / max(int(m), 1)   # no BLAS
+            mean = self.read[:, bounds[j]:bounds[j + 1]].sum(axis=1) / max(int(m), 1)   # no BLAS
             spread = fit_spread(limit, m)
             z[:, j] = (mean - limit) / spread if spread > 0 else np.where(mean > limit, np.inf, -np.inf)
         worst = z.max(axis=1)
@@ -332,7 +361,7 @@ class Evidence:
         out = {"models": list(self.models), "distances": np.round(self.distances, 7).tolist(),
                "curve_sizes": list(self.curve_sizes), "rho": self.rho, "noise": self.noise,
                "limits": [float(x) for x in self.limits], "touches": list(self.touches),
-               "resolution": float(self.resolution), "radii": [float(x) for x in self.radii]}
+               "resolution": float(self.resolution), "radii": [float(x) for x in self.radii], "tied": int(self.tied)}
         if self.misses is not None:
             out["misses"] = np.asarray(self.misses, dtype=np.float64).tolist()
         return out
@@ -347,19 +376,20 @@ class Evidence:
         return cls(tuple(d["models"]), np.asarray(d["distances"], dtype=np.float64).reshape(k, m),
                    tuple(int(n) for n in d["curve_sizes"]), float(d["rho"]), float(d.get("noise", 0.0)),
                    tuple(float(x) for x in d.get("limits", ())), tuple(int(n) for n in d.get("touches", ())), misses,
-                   float(d.get("resolution", 0.0)), tuple(float(x) for x in d.get("radii", ())))
+                   float(d.get("resolution", 0.0)), tuple(float(x) for x in d.get("radii", ())),
+                   int(d.get("tied", 1)))
 
 
 def evidence(models: Sequence[str], signed: Sequence[np.ndarray], curve_sizes: Sequence[int],
              noise: float = 0.0, *, limits: Sequence[float] = (), touches: Sequence[int] = (),
-             misses=None, resolution: float = 0.0, radii: Sequence[float] = ()) -> Evidence:
+             misses=None, resolution: float = 0.0, radii: Sequence[float] = (), tied: int = 1) -> Evidence:
     """The :class:`Evidence` from each accepted model's signed residuals ``(m,)`` (best model first;
     curves in order, ``curve_sizes`` points each; ``limits``, ``touches``, ``misses``,
-    ``resolution`` and ``radii`` as there)."""
+    ``resolution``, ``radii`` and ``tied`` as there)."""
     sizes = tuple(int(n) for n in curve_sizes)
     m = sum(sizes)
     rows = [np.abs(np.asarray(r, dtype=np.float64)) for r in signed]
     rho = lag_one(np.split(np.asarray(signed[0], dtype=np.float64), np.cumsum(sizes)[:-1])) if rows else 0.0
     return Evidence(tuple(models), np.array(rows).reshape(len(rows), m), sizes, float(rho), float(noise),
                     tuple(float(x) for x in limits), tuple(int(n) for n in touches), misses, float(resolution),
-                    tuple(float(x) for x in radii))
+                    tuple(float(x) for x in radii), max(1, min(int(tied), len(rows))))

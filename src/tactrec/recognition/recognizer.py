@@ -234,12 +234,25 @@ class Recognizer:
         limit = max(fit_limit(touch, self.floor), touch.fit)
         found = evidence([r.model for r in ok], [self._residuals(r, touch) for r in ok],
                          [len(c) for c in touch.joint_curves], touch.noise, limits=(limit,),
-                         resolution=resolution(touch, self.floor), radii=(touch.radius,))
+                         resolution=resolution(touch, self.floor), radii=(touch.radius,),
+                         tied=self._tied(ok, limit, outcome.settled))
         out = Recognition(ranking, touch.estimate, 0.0, self.method.name, found, outcome.settled, outcome.work,
                           outcome.depth, touch, outcome.allowed, self.unknown_prior, self.chance)
         out.best                                # the answer and its probabilities are part of its seconds
         object.__setattr__(out, "seconds", time.perf_counter() - start)          # set once, before anyone sees it
         return out
+
+    def _tied(self, ok: list[Registration], limit: float, settled: bool) -> int:
+        """How many of the registrations ``ok`` (best first) the probabilities read as the best's fit
+        (:attr:`~tactrec.probability.Evidence.tied`): where the search did not settle, its errors only
+        bound each model's fit, and those within the method's ``ratio`` of the best (or of ``limit``),
+        which its next round would have searched, are not told apart; 1 where it settled or the
+        method has no such ratio."""
+        ratio = getattr(self.config, "ratio", None)
+        if settled or ratio is None or not ok:
+            return 1
+        bound = float(ratio) * max(ok[0].error / ok[0].scale, limit)
+        return int(sum(r.error / r.scale <= bound for r in ok))
 
     def _fits(self, touch: Touch, outcome) -> bool:
         """Whether the best registration of ``outcome`` fits ``touch`` (within its fit limit)."""
