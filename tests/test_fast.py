@@ -403,6 +403,26 @@ def test_database_keeps_the_curvature_field_and_rejects_a_corrupted_one(tmp_path
         load_database(out)
 
 
+def test_a_loaded_database_reads_its_fields_from_the_file_and_refuses_a_file_changed_since(tmp_path):
+    """A mesh loaded from a database holds no compressed copy of its file: its distance field is read
+    from the file on first use and equals the one built from the mesh; a file replaced after loading
+    is one error naming it, never a field of another version."""
+    out = tmp_path / "db"
+    build_database(["pear"], out, quiet=True)
+    model = load_database(out).get("pear").model
+    held = model._stored_field
+    assert not any(isinstance(v, (bytes, bytearray)) or hasattr(v, "getbuffer") for v in vars(held).values())
+    fresh = load_model("pear").distance_field
+    assert np.array_equal(model.distance_field.index, fresh.index)
+    again = load_database(out).get("pear").model
+    item = json.loads((out / "index.json").read_text())["models"][0]
+    path = out / item["file"]
+    os.utime(path, ns=(path.stat().st_atime_ns, path.stat().st_mtime_ns + 10 ** 9))
+    with pytest.raises(InputError, match="changed since the database was loaded") as caught:
+        again.distance_field
+    assert str(path) in str(caught.value) or path.name in str(caught.value)
+
+
 def test_probabilities_and_the_ambiguity_flag_in_the_json(table1):
     """Two identical models cannot be told apart: half each, flagged; a clear winner is not
     flagged and carries almost all the probability; accepted models' probabilities and unknown's sum to 1."""

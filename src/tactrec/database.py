@@ -179,10 +179,11 @@ def _load_entry(db: Path, item: dict, *, fields: bool = True) -> ModelEntry:
         raise InputError(f"corrupted database file ({exc.reason})", path) from None
     except (ValueError, KeyError, OSError, EOFError) as exc:
         raise InputError(f"corrupted database file ({exc.__class__.__name__}: {exc})", path) from None
-    if not fields and getattr(model, "_stored_field", None) is not None:
-        from .surfaces.mesh_field import FieldsElsewhere
+    if getattr(model, "_stored_field", None) is not None:
+        from .surfaces.mesh_field import FieldsElsewhere, FieldsOnDisk
 
-        model._stored_field = FieldsElsewhere(arrays, path)
+        # the fields are read from the file when used, not kept compressed in memory
+        model._stored_field = FieldsOnDisk(path, arrays.files) if fields else FieldsElsewhere(arrays, path)
     return ModelEntry(model, table, (str(db), dict(item)))
 
 

@@ -25,6 +25,7 @@ is coarser.  ``tactrec bench field`` measures it against exact distances.
 from __future__ import annotations
 
 import dataclasses
+import os
 from typing import ClassVar
 
 import numpy as np
@@ -222,3 +223,33 @@ class FieldsElsewhere:
     def __getitem__(self, key):
         self._check(key)
         return self.kept[key]
+
+
+class FieldsOnDisk:
+    """In place of a mesh's stored arrays, those of its database file read when used (a distance field
+    on its model's first search, a tip's offset field on the first touch with that tip): the
+    compressed file is not kept in memory, about as much again as the field it holds.  The file is
+    opened anew for each read, and must be the one whose checksum was checked on loading (its size
+    and modification time unchanged), else the read is an :class:`~tactrec.errors.InputError`."""
+
+    def __init__(self, path, files):
+        self.path = path
+        self.files = tuple(files)
+        stat = os.stat(path)
+        self._stamp = (stat.st_size, stat.st_mtime_ns)
+
+    def __contains__(self, key) -> bool:
+        return key in self.files
+
+    def __getitem__(self, key):
+        from ..errors import InputError
+
+        try:
+            stat = os.stat(self.path)
+            if (stat.st_size, stat.st_mtime_ns) != self._stamp:
+                raise InputError("changed since the database was loaded; load it again", self.path)
+            with np.load(self.path, allow_pickle=False) as arrays:
+                return np.asarray(arrays[key])
+        except OSError as exc:
+            raise InputError(f"unreadable since the database was loaded ({exc.__class__.__name__})",
+                             self.path) from None
