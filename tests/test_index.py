@@ -78,3 +78,30 @@ def test_stored_rings_are_the_rings_and_bad_ones_are_refused(sphere):
     bad = dict(rings.to_store(), rings_places=rings.places + len(sphere.vertices))
     with pytest.raises(ValueError, match="rings"):
         PlaceRings.from_store(bad, len(sphere.vertices))
+
+
+def test_a_face_many_parts_share_is_never_sure_whatever_the_catalogue_s_order():
+    """Four boxes of other sizes, whose flat faces read alike to the index, the touched one last in
+    the catalogue, so that the first round's places all lie on the others: 20 seeded noise-free
+    touches on its top face, whose 12 mm curves stay on the face.  Every box fits each touch, so
+    none may come back sure (>= 0.95), and before the search stops every box is posed (the touched
+    one among them), however the index orders equal readings."""
+    from tactrec.recognition import ModelEntry, Recognizer
+    from tactrec.tables import CurvatureTable
+
+    entries = []
+    for name, extents in (("a", (70.0, 60.0, 50.0)), ("b", (80.0, 50.0, 40.0)), ("c", (60.0, 60.0, 60.0)),
+                          ("touched", (60.0, 60.0, 40.0))):
+        box = trimesh.creation.box(extents)
+        v, f = trimesh.remesh.subdivide_to_size(box.vertices, box.faces, max_edge=2.0)
+        model = MeshModel(np.asarray(v), np.asarray(f), name=name, units="mm")
+        entries.append(ModelEntry(model, CurvatureTable(model.table_samples())))
+    assert len(PlaceIndex(entries[:3])) > FastConfig.index_round
+    model = entries[-1].model
+    top = np.flatnonzero((model.vertices[:, 2] > 19.9) & (np.abs(model.vertices[:, :2]).max(axis=1) < 12.0))
+    rng = np.random.default_rng(12)
+    with Recognizer(entries) as recognizer:
+        for site in rng.choice(top, 20, replace=False):
+            result = recognizer.recognize(simulate_touch(model, [int(site)], points=41, spacing=0.3, rng=rng))
+            assert result.confidence < 0.95
+            assert {r.model for r in result.ranking if r.ok} == {"a", "b", "c", "touched"}

@@ -865,9 +865,10 @@ def test_a_later_touch_searches_the_standing_models_first_and_every_model_where_
     is consistent with every touch), a new touch is searched among their models only where one of
     them fits it, and over every model where none does.  20 seeded sessions of two noisy touches
     of the four meshes: wherever touch 1 left standing fewer models than all and touch 2 fits one, the
-    others were not searched for touch 2, and the sessions are right and sure on at least 19.  Then
-    a touch of the ring after two of the egg: no standing pose fits it, so its own search covers
-    every model and poses the ring."""
+    others were not searched for touch 2 (a standing model the index reads far from the fit need not
+    be either), and the sessions are right and sure on at least 19.  Then
+    a touch of the ring after two of the egg: no standing pose fits it, so its own search goes past
+    the standing models and poses the ring."""
     right, narrowed = 0, 0
     with Recognizer(small) as recognizer:
         for k in range(20):
@@ -882,7 +883,7 @@ def test_a_later_touch_searches_the_standing_models_first_and_every_model_where_
             searched = {r.model for r in own.ranking if r.outcome is not Outcome.NOT_SEARCHED}
             if standing and len(standing) < len(small) and any(r.ok and r.model in standing for r in own.ranking):
                 narrowed += 1
-                assert searched == standing, (k, searched, standing)
+                assert searched <= standing, (k, searched, standing)
         assert right >= 19, right
         assert narrowed >= 10, f"only {narrowed} sessions searched their standing models first: the check is vacuous"
         egg, ring = small[0], small[3]
@@ -893,5 +894,4 @@ def test_a_later_touch_searches_the_standing_models_first_and_every_model_where_
         touch = simulate_random_touch(ring.model, rng=np.random.default_rng((45,)), **NOISY)
         session.add(touch, sensor_to_world(touch, pose))
         own = session.records[-1].own
-        assert all(r.outcome is not Outcome.NOT_SEARCHED for r in own.ranking)
-        assert own.best == ring.name
+        assert own.best == ring.name                 # not among the standing models: the search went past them

@@ -98,6 +98,14 @@ class PlaceIndex:
         rows, best, side = self._distances(touch, among)
         return self._of(rows, best, side, self._first(best, int(count)))
 
+    def band(self, touch, among, model: int, vertices: np.ndarray) -> float:
+        """The median distance to ``touch``'s rings of model ``model``'s places at ``vertices`` (of
+        the models ``among``; -inf where none of them is a place)."""
+        rows, best, _ = self._distances(touch, among)
+        mine = self.owner[rows] == model
+        chosen = mine & np.isin(self.vertex[rows], vertices)
+        return float(np.median(best[chosen])) if chosen.any() else -np.inf
+
     def each_best(self, touch, among, count: int) -> Ranked:
         """Each model's own ``count`` places nearest ``touch``'s rings (of the models ``among``), by
         model, each model's best first: the ranking's order within each model, which a band of

@@ -226,8 +226,13 @@ class FastMethod:
             if fine:                                # the fit test steers: the leader's stall is searched about first
                 grids += grid_leaders(state, meshes, runner, room, grids, 1)
             if state.settled():
-                settled = True
-                break
+                twins = indexed.twins(models, *state.leader_at()) if indexed is not None else []
+                if not twins:
+                    settled = True
+                    break
+                # before it stops, the models the index cannot tell from the fit's place are posed
+                work += self._floor(state, indexed, twins, runner)
+                continue
             group = state.contending()
             if indexed is not None:                 # the indexed tier runs through the catalogue first
                 group = [i for i in state.waiting() if state.next[i] == indexed.k] or group
@@ -280,6 +285,17 @@ class FastMethod:
         for i, found in zip(ok, runner.map(polish_stage, ok, touch, config, True, items=[ranking[i] for i in ok])):
             ranking[i], work = found.registration, work + found.queries
         return dataclasses.replace(outcome, ranking=ranking, work=int(outcome.work + work))
+
+    def _floor(self, state: State, indexed: IndexedTier, twins: list[int], runner) -> int:
+        """The indexed tier on the own best places of the models ``twins``
+        (:meth:`~.fast_index.IndexedTier.floor_round`), each model's next tier left where it was
+        (the indexed tier, if its places in the ranking are not all screened).  Returns the work."""
+        spots = indexed.floor_round(twins)
+        before = {i: state.next[i] for i in spots}
+        work = self._tier(state, sorted(spots), indexed.k, runner, spots) if spots else 0
+        for i, k in before.items():
+            state.next[i] = k if k > indexed.k or indexed.left(i) else indexed.k + 1
+        return work
 
     @staticmethod
     def _tier(state: State, group: list[int], k: int, runner, spots=None) -> int:

@@ -136,9 +136,10 @@ class FastConfig(Config):
     #: places an indexed tier's first round screens (catalogue-wide; each later round twice as many):
     #: the index's ranking puts the true place of most touches among the first few thousand
     index_round: ClassVar[int] = 2048
-    #: places of every model in the indexed tier's first round, its own best by the index: the order
-    #: across models means nothing below the touch's noise, and a model whose places all rank behind
-    #: another's that fits would never be posed (two parts sharing a face, spheres of 30 and 31 mm)
+    #: places of a model the index cannot tell from a fit's (its best place reads within the fit's
+    #: band: :meth:`~tactrec.methods.fast_index.IndexedTier.twins`) screened before the search stops,
+    #: its own best by the index: a model whose places all rank behind another's that fits would
+    #: never be posed (two parts sharing a face, spheres of 30 and 31 mm)
     index_floor: ClassVar[int] = 8
     #: in an indexed round, hypotheses a model keeps for the field steps per place it screens (at
     #: most ``screen_keep``): a model with a few places in a round takes a few hypotheses, not 96

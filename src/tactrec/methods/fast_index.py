@@ -6,18 +6,29 @@ searched, the ``places`` x models places whose rings lie nearest the touch's
 (:meth:`tactrec.index.PlaceIndex.ranked`): as many places as a tier of each model's best
 ``places`` would, but chosen across the catalogue, so that a model whose surface is nothing like
 the touch's takes none.  They are screened in rounds, best first: the first round
-``index_round`` places and every model's own best ``index_floor``, each later one twice as many, over the models whose turn it is (the
+``index_round`` places, each later one twice as many, over the models whose turn it is (the
 search's own rule, :meth:`~tactrec.methods.fast_state.State.contending`: the leaders first while
 they stand near the best; else every model with places left).  A model's first tier ends when
 its places in the ranking are all screened; a search that settles (a fit, or a clear best) stops
-between rounds, so most touches screen a few thousand places of a catalogue, not every model's 500.
+between rounds, so most touches screen a few thousand places of a catalogue, on the few hundred
+models that hold them, not every model's 500: the work of a settled search does not grow with the
+models whose surfaces are nothing like the touch's.
 
-Every model's own best few places are in the first round because differences of rings below the
-touch's noise and a place's offset from the contact (up to a cell) mean nothing: where two models
-share the touched surface (a face two parts have, spheres of 30 and 31 mm), the catalogue's order
-may put all of one's places before the other's, and a search that stopped on the first fit would
-never pose the other, and call the answer sure.  With its best places screened, each model has a
-cheap score, and the search's rules (deferral, a clear best) judge it as in any tier.
+Before a search stops, the models the index cannot tell from the fit are posed too
+(:meth:`IndexedTier.twins`).  Differences of rings below the touch's noise and a place's offset
+from the contact (up to a cell) mean nothing: where two models share the touched surface (a face
+two parts have, a ring and its twin with one feature more), the catalogue's order may put all of
+one's places behind the other's, and a search that stopped on the first fit would never pose the
+other, and call the answer sure.  So the fit's own places about its contact (within a cell and a
+half, the offset a place may have; the median of their readings) give the band the index reads
+that surface at, widened by what the touch's own noise moves its rings (twice ``within`` times
+their spread, :func:`~tactrec.surfaces.mesh_rings.touch_ring_noise`: the true reading lies that
+far from the touch's, and a twin's that far from the true one), and every model whose best place
+reads within it has its own best places that
+do (at most ``index_floor``) screened, and is judged by the search's rules (deferral, a clear
+best) as in any tier, before the search may stop.  Where the index reads the touched surface
+well, the band is narrow and holds a few models; where it reads it badly, it cannot rule many
+out, and they are posed.
 
 Each model screens its places of a round at every rotation on its field
 (:func:`~tactrec.methods.fast_stages.field_poses`), keeping ``index_keep`` hypotheses a place for
@@ -40,39 +51,75 @@ class IndexedTier:
     """One touch's progress through the indexed tier ``k`` over the mesh models ``meshes``."""
 
     def __init__(self, index, touch, meshes: list[int], config, k: int):
-        self.k, self.config = k, config
+        self.k, self.config, self.index, self.touch, self.meshes = k, config, index, touch, meshes
         self.ranked = index.ranked(touch, meshes, config.tiers[k].places * len(meshes))
         self.floor = index.each_best(touch, meshes, config.index_floor)
         self.done = np.zeros(len(self.ranked), dtype=bool)
         self.rounds = 0
         size = max(meshes) + 1
-        self._floored = np.bincount(self.floor.model, minlength=size) > 0
+        self.floored = np.zeros(size, dtype=bool)                       # whose own best places were screened
+        self.reach = -np.inf                                             # the last fit's band (twins)
         self._left = np.bincount(self.ranked.model, minlength=size)      # each model's places not yet screened
+        first = np.r_[True, self.floor.model[1:] != self.floor.model[:-1]] if len(self.floor) else np.zeros(0, bool)
+        self._own = np.full(size, np.inf)                                # each model's best place's distance
+        self._own[self.floor.model[first]] = self.floor.distance[first]
 
     @staticmethod
     def _keys(ranked) -> np.ndarray:
         return (ranked.model * (2 ** 31) + ranked.vertex) * 2 + (ranked.sign > 0)
 
     def left(self, i: int) -> bool:
-        """Whether model ``i`` has places not yet screened: its own best before the first round, or
-        places of the ranking."""
-        return bool((self.rounds == 0 and self._floored[i]) or self._left[i] > 0)
+        """Whether model ``i`` has places of the ranking not yet screened."""
+        return bool(self._left[i] > 0)
 
     def next_round(self, group: list[int]) -> dict[int, dict[int, np.ndarray]]:
         """The next round's places of the models ``group``: per model, per side of the normal, its
         vertices in the ranking's order; marked screened."""
         size = self.config.index_round * 2 ** self.rounds
         take = np.flatnonzero(~self.done & np.isin(self.ranked.model, group))[:size]
-        model, vertex, sign = self.ranked.model[take], self.ranked.vertex[take], self.ranked.sign[take]
-        if self.rounds == 0:                    # and every model's own best places
-            floor = self.floor
-            extra = np.isin(floor.model, group) & ~np.isin(self._keys(floor), self._keys(self.ranked)[take])
-            model, vertex, sign = (np.concatenate([a, b[extra]]) for a, b in
-                                   ((model, floor.model), (vertex, floor.vertex), (sign, floor.sign)))
-            self.done |= np.isin(self._keys(self.ranked), self._keys(floor)[np.isin(floor.model, group)])
         self.done[take] = True
         self.rounds += 1
         self._left = np.bincount(self.ranked.model[~self.done], minlength=len(self._left))
+        return self._spots(self.ranked.model[take], self.ranked.vertex[take], self.ranked.sign[take])
+
+    def twins(self, models, leader: int, location: np.ndarray) -> list[int]:
+        """The models whose own best places have not been screened and whose best place reads within
+        the band of model ``leader``'s places about its fit's contact ``location`` (model
+        coordinates: its places within a cell and a half whose normals lie within 37 degrees of the
+        nearest one's; the median of their readings, widened by the touch's noise): the index cannot
+        tell such a model's surface from the fitted one's, and it may fit as well (module text).
+        The band is kept for :meth:`floor_round`."""
+        if leader not in self.meshes or location is None:
+            return []
+        from ..surfaces.mesh_rings import CELL_MM, touch_ring_noise
+        from ..units import conversion
+
+        model = models[leader].model
+        far = np.linalg.norm(model.vertices - np.asarray(location, dtype=np.float64), axis=1)
+        normal = model.fine_curvatures.normal
+        near = np.flatnonzero((far <= 1.5 * CELL_MM * conversion("mm", model.units))
+                              & (normal @ normal[int(np.argmin(far))] > 0.8))
+        # the touch's own noise moves its rings by up to ``within`` x their spread (first order): the
+        # fitted surface's true reading, and a twin's, lie that much farther out (triangle inequality)
+        noise = max(touch_ring_noise(self.touch, sign) for sign, _ in self.touch.sides)
+        reading = self.index.band(self.touch, self.meshes, leader, near)
+        self.reach = (np.sqrt(max(reading, 0.0)) + 2.0 * self.config.within * noise) ** 2 if reading >= 0 else reading
+        return [int(i) for i in np.flatnonzero((self._own <= self.reach) & ~self.floored) if i != leader]
+
+    def floor_round(self, group: list[int]) -> dict[int, dict[int, np.ndarray]]:
+        """Of each of the models ``group``'s own best ``index_floor`` places, those that read within the
+        last :meth:`twins`' band and are not yet screened (as :meth:`next_round` gives them); the
+        models marked floored, the places screened."""
+        self.floored[group] = True
+        pick = np.isin(self.floor.model, group) & (self.floor.distance <= self.reach)
+        keys, ranked = self._keys(self.floor)[pick], self._keys(self.ranked)
+        fresh = ~np.isin(keys, ranked[self.done])
+        self.done |= np.isin(ranked, keys)
+        self._left = np.bincount(self.ranked.model[~self.done], minlength=len(self._left))
+        return self._spots(*(a[pick][fresh] for a in (self.floor.model, self.floor.vertex, self.floor.sign)))
+
+    @staticmethod
+    def _spots(model, vertex, sign) -> dict[int, dict[int, np.ndarray]]:
         out: dict[int, dict[int, np.ndarray]] = {}
         for i in np.unique(model):
             mine = model == i

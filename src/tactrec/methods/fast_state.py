@@ -95,6 +95,11 @@ class State:
         ranked = sorted(self.best, key=lambda i: (self.error(i), i))
         return (ranked[0], self.error(ranked[0])) if ranked else (None, np.inf)
 
+    def leader_at(self) -> tuple[int | None, np.ndarray | None]:
+        """The leading model and its registration's contact (model coordinates; None for none)."""
+        leader, _ = self.leader()
+        return leader, (None if leader is None else self.best[leader].location)
+
     def waiting(self) -> list[int]:
         return [i for i in self.next if i not in self.rejected and self.next[i] < len(self.config.tiers)]
 

@@ -29,7 +29,7 @@ from ..linalg import dot3, lstsq, norm3
 from .mesh_grid import first_per_cell
 from ..units import conversion
 
-__all__ = ["PlaceRings", "model_rings", "touch_rings", "ARCS_MM", "ANGLES", "CELL_MM", "FEATURES", "ENDED"]
+__all__ = ["PlaceRings", "model_rings", "touch_rings", "touch_ring_noise", "ARCS_MM", "ANGLES", "CELL_MM", "FEATURES", "ENDED"]
 
 #: arc lengths (mm) the rings are read at: a P3 touch's curves reach 12 mm each way
 ARCS_MM = (3.0, 6.0, 9.0, 11.0)
@@ -115,6 +115,35 @@ def touch_rings(touch, sign: int) -> np.ndarray:
     """The rings of ``touch`` (:class:`~tactrec.features.Touch`) with its normal as estimated (``sign``
     1) or reversed (-1): ``(FEATURES,)``, NaN at the arcs its curves do not reach in at least three
     directions that fix the fit."""
+    out = np.full(FEATURES, np.nan)
+    for j, (theta, values) in enumerate(_touch_samples(touch, sign)):
+        if len(values) >= 3:
+            out[j], out[len(ARCS_MM) + j] = _fit(theta, values)
+    return out
+
+
+def touch_ring_noise(touch, sign: int) -> float:
+    """How far the touch's noise moves its rings (:func:`touch_rings`): the root of the summed
+    variances of its features, from each height's noise (the touch's own ``sigma``, millimetres)
+    through the fit of each arc, contact and normal held (a first-order bound on a draw's
+    distance from the noise-free rings)."""
+    sigma = float(touch.noise) * conversion(touch.data.units, "mm")
+    total = 0.0
+    for j, (theta, values) in enumerate(_touch_samples(touch, sign)):
+        if len(values) < 3:
+            continue
+        basis = np.stack([np.ones_like(theta), np.cos(2.0 * theta), np.sin(2.0 * theta)], axis=1)
+        gram = basis.T @ basis
+        if np.linalg.matrix_rank(gram) < 3:
+            continue
+        cov = (sigma / ARCS_MM[j]) ** 2 * np.linalg.inv(gram)
+        total += cov[0, 0] + max(cov[1, 1], cov[2, 2])
+    return float(np.sqrt(total))
+
+
+def _touch_samples(touch, sign: int) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Per arc of :data:`ARCS_MM`, the directions and ``h / s`` of the touch's curves at that arc from
+    the contact (each half of each curve that reaches it)."""
     t = touch.in_units(conversion(touch.data.units, "mm"))
     s = t.on_surface(sign)
     g = s.geometry if s is not t else t.oriented(sign)
@@ -132,8 +161,8 @@ def touch_rings(touch, sign: int) -> np.ndarray:
             arc = np.concatenate([[0.0], np.cumsum(norm3(np.diff(half, axis=0)))])
             arc += norm3(half[0] - c)
             rays.append((half, arc))
-    out = np.full(FEATURES, np.nan)
-    for j, s_mm in enumerate(ARCS_MM):
+    out = []
+    for s_mm in ARCS_MM:
         theta, values = [], []
         for half, arc in rays:
             if arc[-1] < s_mm:
@@ -143,6 +172,5 @@ def touch_rings(touch, sign: int) -> np.ndarray:
             flat = x - h * n
             theta.append(np.arctan2(dot3(flat, second), dot3(flat, first)))
             values.append(h / s_mm)
-        if len(values) >= 3:
-            out[j], out[len(ARCS_MM) + j] = _fit(np.array(theta), np.array(values))
+        out.append((np.array(theta), np.array(values)))
     return out
