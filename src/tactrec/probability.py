@@ -61,8 +61,9 @@ noisy data, whose distances lie mostly beyond it, are read nearly as they
 are.
 
 An unsettled search.  A search that ended on its budget, its best beyond a
-fit, has found for each model the best pose it tried: an upper bound on the
-model's fit, not the fit.  Two such bounds order nothing: on a noise-free
+plausible fit (:func:`plausible_fit`), has missed the true pose somewhere,
+and has found for each model only the best pose it tried: an upper bound on
+the model's fit, not the fit.  Two such bounds order nothing: on a noise-free
 touch of a ring whose twin shares the touched surface, the search stopped at
 0.016 mm on the ring and 0.013 mm on its twin, both of which fit at 0, and
 the shares read the bounds as fits and called the twin sure.  So the models
@@ -97,7 +98,7 @@ from .bootstrap import REPLICATES, SEED, bootstrap_probabilities, lag_one
 from .linalg import times
 
 __all__ = ["Evidence", "residuals", "evidence", "bootstrap_probabilities", "noise_fit", "fit_limit", "resolution",
-           "fit_standard_error", "fit_spread", "open_world", "AMBIGUOUS", "REPLICATES", "UNKNOWN_PRIOR",
+           "fit_standard_error", "plausible_fit", "fit_spread", "open_world", "AMBIGUOUS", "REPLICATES", "UNKNOWN_PRIOR",
            "CONSISTENT_SE", "NOISE_VARIANCE", "SEARCH_MISS", "FLOOR", "most_probable"]
 
 #: on noise-free data a fit is within this fraction of the touch's radius, for a method without a ``floor`` of
@@ -153,6 +154,17 @@ def fit_standard_error(fit: float, points: int) -> float:
     """How far another draw of the noise moves a fit of mean distance ``fit`` over ``points`` points:
     the half-normal's spread is ``sqrt(pi / 2 - 1)`` times its mean, so ``fit sqrt(pi / 2 - 1) / sqrt(points)``."""
     return float(fit) * np.sqrt(np.pi / 2.0 - 1.0) / np.sqrt(points)
+
+
+def plausible_fit(limit: float, noise: float, points: int, within: float) -> float:
+    """The largest best error (data units) that may still be a fit of a touch of ``points`` points,
+    noise ``noise`` (per coordinate) and fit limit ``limit`` (:func:`fit_limit`): ``within`` standard
+    errors of a fit (:func:`fit_standard_error`) above the limit, or the limit itself where the
+    noise's own spread stays below it (noise-free data, whose true pose fits far within it)."""
+    fit = noise_fit(noise)
+    if fit + within * fit_standard_error(fit, points) <= limit:
+        return float(limit)
+    return float(limit + within * fit_standard_error(limit, points))
 
 
 def fit_spread(limit: float, points: int) -> float:

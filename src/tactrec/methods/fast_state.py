@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..linalg import clearly_less
-from ..probability import fit_limit, fit_standard_error, noise_fit, resolution
+from ..probability import fit_limit, noise_fit, plausible_fit, resolution
 from ..registration.result import Registration
 from .common import in_model_units
 from .fast_stages import hop_stage, polish_stage, tier_span
@@ -65,16 +65,13 @@ class State:
         self.next = {i: 0 for i in meshes}
         self.models, self.counts = models, {}
         self.limit = max(fit_limit(touch, config.floor), touch.fit)      # a caller's joint fit, with a context
-        points, noise = len(touch.joint_points), noise_fit(touch.noise)
         #: the data's noise lies below the fit floor: the true pose fits far within the limit
-        self.noise_free = bool(noise <= resolution(touch, config.floor))
+        self.noise_free = bool(noise_fit(touch.noise) <= resolution(touch, config.floor))
         # a best error this far above the limit may still be a fit under the noise; beyond it the true
         # pose was missed somewhere, and no model's first tiers rule it out.  Where the noise's own
         # spread stays below the floor (noise-free data), the limit is the floor, not a draw of the
         # noise: a best error above it is such a miss
-        below = noise + config.within * fit_standard_error(noise, points) <= self.limit
-        self.plausible = self.limit if below else \
-            self.limit + config.within * fit_standard_error(self.limit, points)
+        self.plausible = plausible_fit(self.limit, touch.noise, len(touch.joint_points), config.within)
 
     def places(self, i: int, k: int) -> int:
         """How many places tier ``k`` takes on model ``i`` (:func:`tier_places`), for this touch."""

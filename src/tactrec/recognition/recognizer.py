@@ -29,7 +29,7 @@ from ..errors import InputError
 from ..features import Context, Touch
 from ..io.touch import TactileData
 from ..methods import DEFAULT_METHOD, get_method
-from ..probability import FLOOR, UNKNOWN_PRIOR, evidence, fit_limit, residuals, resolution
+from ..probability import FLOOR, UNKNOWN_PRIOR, evidence, fit_limit, plausible_fit, residuals, resolution
 from ..registration.result import Registration
 from ..runner import Held, Pool, Serial, can_fork
 from ..tables import CurvatureTable
@@ -235,23 +235,27 @@ class Recognizer:
         found = evidence([r.model for r in ok], [self._residuals(r, touch) for r in ok],
                          [len(c) for c in touch.joint_curves], touch.noise, limits=(limit,),
                          resolution=resolution(touch, self.floor), radii=(touch.radius,),
-                         tied=self._tied(ok, limit, outcome.settled))
+                         tied=self._tied(ok, touch, limit, outcome.settled))
         out = Recognition(ranking, touch.estimate, 0.0, self.method.name, found, outcome.settled, outcome.work,
                           outcome.depth, touch, outcome.allowed, self.unknown_prior, self.chance)
         out.best                                # the answer and its probabilities are part of its seconds
         object.__setattr__(out, "seconds", time.perf_counter() - start)          # set once, before anyone sees it
         return out
 
-    def _tied(self, ok: list[Registration], limit: float, settled: bool) -> int:
+    def _tied(self, ok: list[Registration], touch: Touch, limit: float, settled: bool) -> int:
         """How many of the registrations ``ok`` (best first) the probabilities read as the best's fit
-        (:attr:`~tactrec.probability.Evidence.tied`): where the search did not settle, its errors only
-        bound each model's fit, and those within the method's ``ratio`` of the best (or of ``limit``),
-        which its next round would have searched, are not told apart; 1 where it settled or the
-        method has no such ratio."""
-        ratio = getattr(self.config, "ratio", None)
-        if settled or ratio is None or not ok:
+        (:attr:`~tactrec.probability.Evidence.tied`): where the search did not settle and its best is
+        beyond a plausible fit (:func:`~tactrec.probability.plausible_fit`), its errors only bound each
+        model's fit, and those within the method's ``ratio`` of the best (or of ``limit``), which its
+        next round would have searched, are not told apart; 1 otherwise, or where the method has no
+        such ratio."""
+        ratio, within = getattr(self.config, "ratio", None), getattr(self.config, "within", None)
+        if settled or ratio is None or within is None or not ok:
             return 1
-        bound = float(ratio) * max(ok[0].error / ok[0].scale, limit)
+        best = ok[0].error / ok[0].scale
+        if best <= plausible_fit(limit, touch.noise, len(touch.joint_points), float(within)):
+            return 1
+        bound = float(ratio) * max(best, limit)
         return int(sum(r.error / r.scale <= bound for r in ok))
 
     def _fits(self, touch: Touch, outcome) -> bool:
