@@ -60,19 +60,13 @@ whose points lie beyond the resolution still loses to one within it, and
 noisy data, whose distances lie mostly beyond it, are read nearly as they
 are.
 
-An unsettled search.  A search that ended on its budget, its best beyond a
-plausible fit (:func:`plausible_fit`), has missed the true pose somewhere,
-and has found for each model only the best pose it tried: an upper bound on
-the model's fit, not the fit.  Two such bounds order nothing: on a noise-free
-touch of a ring whose twin shares the touched surface, the search stopped at
-0.016 mm on the ring and 0.013 mm on its twin, both of which fit at 0, and
-the shares read the bounds as fits and called the twin sure.  So the models
-whose errors lie within the search's own ``ratio`` of the best (those its
-next round would have searched: :meth:`~tactrec.methods.fast_state.State.contending`)
-are *tied* (:attr:`Evidence.tied`): each is read at the best's distances, in
-the shares and in the fit test, and they share evenly what they take
-together.  The answer is still the lowest error of equals; how sure it is falls
-with every model the search could not tell from it.
+An unsettled search.  A search that ended on its budget, its best beyond a plausible fit
+(:func:`plausible_fit`), has missed the true pose somewhere: its errors only bound each model's fit.
+Two bounds order nothing (a noise-free touch of a ring whose twin shares the touched surface stopped
+at 0.016 mm on the ring and 0.013 mm on the twin, both fitting at 0, and the twin was called sure).  So
+the models within the search's ``ratio`` of the best, which its next round would have searched, are
+*tied* (:attr:`Evidence.tied`): read at the best's distances, in the shares and the fit test, sharing
+evenly.  The answer is still the lowest error; how sure it is falls with each model tied to it.
 
 Nothing comes from a simulation setting: the scatter is the touch's own.
 The residuals are those of the points a touch kept: points off their
@@ -157,9 +151,8 @@ def fit_standard_error(fit: float, points: int) -> float:
 
 
 def plausible_fit(limit: float, noise: float, points: int, within: float) -> float:
-    """The largest best error (data units) that may still be a fit of a touch of ``points`` points,
-    noise ``noise`` (per coordinate) and fit limit ``limit`` (:func:`fit_limit`): ``within`` standard
-    errors of a fit (:func:`fit_standard_error`) above the limit, or the limit itself where the
+    """The largest best error (data units) still a fit of ``points`` points of noise ``noise`` and fit
+    limit ``limit``: ``within`` standard errors of a fit above the limit, or the limit itself where the
     noise's own spread stays below it (noise-free data, whose true pose fits far within it)."""
     fit = noise_fit(noise)
     if fit + within * fit_standard_error(fit, points) <= limit:
