@@ -319,9 +319,9 @@ class Evidence:
             return np.full(k, -np.inf)
         points = self.touch_points()
         bounds = np.concatenate([[0], np.cumsum(points)])
-        z = np.empty((k, len(points)))
+        z, read = np.empty((k, len(points))), self.read
         for j, (limit, m) in enumerate(zip(self.limits, points)):
-            mean = self.read[:, bounds[j]:bounds[j + 1]].sum(axis=1) / max(int(m), 1)   # no BLAS
+            mean = read[:, bounds[j]:bounds[j + 1]].sum(axis=1) / max(int(m), 1)   # no BLAS
             spread = fit_spread(limit, m)
             z[:, j] = (mean - limit) / spread if spread > 0 else np.where(mean > limit, np.inf, -np.inf)
         worst = z.max(axis=1)

@@ -102,9 +102,9 @@ class PlaceIndex:
         """The median distance to ``touch``'s rings of model ``model``'s places at ``vertices`` (of
         the models ``among``; -inf where none of them is a place)."""
         rows, best, _ = self._distances(touch, among)
-        mine = self.owner[rows] == model
-        chosen = mine & np.isin(self.vertex[rows], vertices)
-        return float(np.median(best[chosen])) if chosen.any() else -np.inf
+        mine = np.flatnonzero(self.owner[rows] == model)
+        chosen = mine[np.isin(self.vertex[rows[mine]], vertices)]
+        return float(np.median(best[chosen])) if len(chosen) else -np.inf
 
     def each_best(self, touch, among, count: int) -> Ranked:
         """Each model's own ``count`` places nearest ``touch``'s rings (of the models ``among``), by

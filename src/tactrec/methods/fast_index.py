@@ -59,6 +59,7 @@ class IndexedTier:
         size = max(meshes) + 1
         self.floored = np.zeros(size, dtype=bool)                       # whose own best places were screened
         self.reach = -np.inf                                             # the last fit's band (twins)
+        self._ring_noise = None                                          # how far the touch's noise moves its rings
         self._left = np.bincount(self.ranked.model, minlength=size)      # each model's places not yet screened
         first = np.r_[True, self.floor.model[1:] != self.floor.model[:-1]] if len(self.floor) else np.zeros(0, bool)
         self._own = np.full(size, np.inf)                                # each model's best place's distance
@@ -101,7 +102,9 @@ class IndexedTier:
                               & (normal @ normal[int(np.argmin(far))] > 0.8))
         # the touch's own noise moves its rings by up to ``within`` x their spread (first order): the
         # fitted surface's true reading, and a twin's, lie that much farther out (triangle inequality)
-        noise = max(touch_ring_noise(self.touch, sign) for sign, _ in self.touch.sides)
+        if self._ring_noise is None:
+            self._ring_noise = max(touch_ring_noise(self.touch, sign) for sign, _ in self.touch.sides)
+        noise = self._ring_noise
         reading = self.index.band(self.touch, self.meshes, leader, near)
         self.reach = (np.sqrt(max(reading, 0.0)) + 2.0 * self.config.within * noise) ** 2 if reading >= 0 else reading
         return [int(i) for i in np.flatnonzero((self._own <= self.reach) & ~self.floored) if i != leader]

@@ -72,11 +72,15 @@ class PlaceRings:
 def _fit(theta: np.ndarray, values: np.ndarray) -> tuple[float, float]:
     """``a`` and ``|(b, c)|`` of ``a + b cos 2 theta + c sin 2 theta`` fitted to ``values``; NaN where
     the directions do not determine them."""
-    basis = np.stack([np.ones_like(theta), np.cos(2.0 * theta), np.sin(2.0 * theta)], axis=1)
-    coef, rank = lstsq(basis, values)
+    coef, rank = lstsq(_basis(theta), values)
     if rank < 3:
         return np.nan, np.nan
     return float(coef[0]), float(np.hypot(coef[1], coef[2]))
+
+
+def _basis(theta: np.ndarray) -> np.ndarray:
+    """The ring's fit's basis at directions ``theta``: ``1, cos 2 theta, sin 2 theta`` ``(n, 3)``."""
+    return np.stack([np.ones_like(theta), np.cos(2.0 * theta), np.sin(2.0 * theta)], axis=1)
 
 
 def ring_features(ratios: np.ndarray) -> np.ndarray:
@@ -132,7 +136,7 @@ def touch_ring_noise(touch, sign: int) -> float:
     for j, (theta, values) in enumerate(_touch_samples(touch, sign)):
         if len(values) < 3:
             continue
-        basis = np.stack([np.ones_like(theta), np.cos(2.0 * theta), np.sin(2.0 * theta)], axis=1)
+        basis = _basis(theta)
         gram = basis.T @ basis
         if np.linalg.matrix_rank(gram) < 3:
             continue
