@@ -231,7 +231,7 @@ class FastMethod:
                     settled = True
                     break
                 # before it stops, the models the index cannot tell from the fit's place are posed
-                work += self._floor(state, indexed, twins, runner)
+                work += self._indexed(state, indexed, indexed.floor_round(twins), runner)
                 continue
             group = state.contending()
             if indexed is not None:                 # the indexed tier runs through the catalogue first
@@ -255,8 +255,7 @@ class FastMethod:
                 if work > 0 and work * share + cost + polish > allowed:
                     break
                 depth = max(depth, k + 1)
-                work += self._tier(state, sorted(spots), k, runner, spots)
-                state.next.update((i, k) for i in spots if indexed.left(i))     # its next round, if it has one
+                work += self._indexed(state, indexed, spots, runner)
                 continue
             cost = sum(tier_cost(config, k, signs, state.places(i, k), len(touch.curves), len(touch.context))
                        for i in group)
@@ -286,11 +285,11 @@ class FastMethod:
             ranking[i], work = found.registration, work + found.queries
         return dataclasses.replace(outcome, ranking=ranking, work=int(outcome.work + work))
 
-    def _floor(self, state: State, indexed: IndexedTier, twins: list[int], runner) -> int:
-        """The indexed tier on the own best places of the models ``twins``
-        (:meth:`~.fast_index.IndexedTier.floor_round`), each model's next tier left where it was
-        (the indexed tier, if its places in the ranking are not all screened).  Returns the work."""
-        spots = indexed.floor_round(twins)
+    def _indexed(self, state: State, indexed: IndexedTier, spots: dict, runner) -> int:
+        """A round of the indexed tier on ``spots`` (a round of the ranking, or the twins' own best
+        places: :meth:`~.fast_index.IndexedTier.floor_round`), each model's next tier left where it
+        was: the indexed tier while its places in the ranking are not all screened, else the next
+        one, or a deeper tier it had reached.  Returns the work."""
         before = {i: state.next[i] for i in spots}
         work = self._tier(state, sorted(spots), indexed.k, runner, spots) if spots else 0
         for i, k in before.items():
