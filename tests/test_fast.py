@@ -163,6 +163,27 @@ def test_worker_processes_do_not_change_the_result(scans):
     assert [(r.model, r.error) for r in a.ranking] == [(r.model, r.error) for r in b.ranking]
 
 
+def _prepared(held, indices) -> list[bool]:
+    return [all(k in vars(held.entries[i].model) for k in ("distance_field", "_aabb")) for i in indices]
+
+
+def test_each_worker_holds_only_its_own_share_of_the_models():
+    """Two workers: each prepares (holds the distance field and tree of) only its own half of the
+    models, and this process, which searches in neither, holds none after a recognition."""
+    from conftest import small_meshes
+    from tactrec.runner import Workers
+
+    models = small_meshes()
+    touch = simulate_touch(models[3].model, [800], points=61, spacing=0.3, angle=45.0, rng=4)
+    with Recognizer(models, workers=2) as recognizer:
+        assert recognizer.recognize(touch).best == "ring"
+        everything = list(range(len(models)))
+        held = Workers.each(recognizer.runner.pool, _prepared, [(everything,), (everything,)])
+        assert not any(_prepared(recognizer.runner.held, everything))
+    assert [i for i, p in enumerate(held[0]) if p] == everything[0::2]
+    assert [i for i, p in enumerate(held[1]) if p] == everything[1::2]
+
+
 def test_a_worker_that_dies_leaves_the_recognition_to_this_process(scans):
     """A worker process killed (as the OOM killer would) between two touches: the next recognition
     runs in this process, with the same answer."""

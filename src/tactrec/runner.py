@@ -39,13 +39,13 @@ class WorkerLost(RuntimeError):
     """A worker process ended before it answered (out of memory, killed)."""
 
 
-def _serve(state, conn, foreign, start) -> None:
-    """A worker's life: close the other pipes' ends inherited with the fork, run ``start()``, then
-    answer ``(fn, args)`` with ``fn(state, *args)`` until told to stop or the pipe closes."""
+def _serve(state, conn, foreign, start, rank: int) -> None:
+    """A worker's life: close the other pipes' ends inherited with the fork, run ``start(state, rank)``,
+    then answer ``(fn, args)`` with ``fn(state, *args)`` until told to stop or the pipe closes."""
     for other in foreign:
         other.close()
     if start is not None:
-        start()
+        start(state, rank)
     while True:
         try:
             message = conn.recv()
@@ -65,17 +65,18 @@ def _serve(state, conn, foreign, start) -> None:
 
 
 class Workers:
-    """``count`` processes forked with ``state``, each running ``start()`` first (see the module text).
+    """``count`` processes forked with ``state``, worker ``k`` running ``start(state, k)`` first (see
+    the module text).
 
     ``fn(state, *args)`` runs in a worker for each of the ``args`` given; exceptions are raised in
     this process; a worker that ends unanswered raises :class:`WorkerLost`, and the pool is closed."""
 
-    def __init__(self, state, count: int, *, start: Callable[[], None] | None = None):
+    def __init__(self, state, count: int, *, start: Callable[[object, int], None] | None = None):
         context = multiprocessing.get_context("fork")
         self._pipes, self._processes = [], []
-        for _ in range(count):
+        for k in range(count):
             mine, theirs = context.Pipe()
-            process = context.Process(target=_serve, args=(state, theirs, list(self._pipes) + [mine], start),
+            process = context.Process(target=_serve, args=(state, theirs, list(self._pipes) + [mine], start, k),
                                       daemon=True)
             process.start()
             theirs.close()
@@ -100,18 +101,19 @@ class Workers:
             raise value
         return value
 
-    def each(self, fn: Callable, args: Sequence[tuple]) -> list:
-        """``fn(state, *args[k])`` in worker ``k`` for each ``k`` (at most one per worker), all at once;
-        their answers in order."""
+    def each(self, fn: Callable, args: Sequence[tuple | None]) -> list:
+        """``fn(state, *args[k])`` in worker ``k`` for each ``k`` whose ``args[k]`` is not None (at most
+        one call per worker), all at once; their answers in order (None where nothing was asked)."""
         if len(args) > len(self._pipes):
             raise ValueError(f"{len(args)} calls for {len(self._pipes)} workers")
         try:
             for pipe, a in zip(self._pipes, args):
-                pipe.send((fn, tuple(a)))
+                if a is not None:
+                    pipe.send((fn, tuple(a)))
         except (BrokenPipeError, OSError):
             self.close(timeout=0.5)
             raise WorkerLost("a worker process ended before it was asked") from None
-        return [self._answer(k) for k in range(len(args))]
+        return [None if a is None else self._answer(k) for k, a in enumerate(args)]
 
     def map(self, fn: Callable, items: Iterable) -> Iterable:
         """``fn(state, item)`` for each of ``items``, each worker taking the next item when it is done;
@@ -180,10 +182,17 @@ class Serial:
         return stage(self.held, list(indices), *args, list(items))
 
 
-def _one_thread() -> None:
+def _start(prepare, held: Held, rank: int, count: int) -> None:
+    """A worker's start: one thread for its kernels, and its own share of the models prepared."""
     from .engine import one_thread
 
     one_thread()                 # the processes share the cores; a kernel's own threads would only contend
+    for entry in held.entries[rank::count] if prepare is not None else ():
+        prepare(entry)
+
+
+def _ready(held: Held) -> None:
+    return None
 
 
 def _stage(held: Held, stage, indices, args) -> list:
@@ -191,31 +200,43 @@ def _stage(held: Held, stage, indices, args) -> list:
 
 
 class Pool:
-    """Runs a stage over the models dealt into fixed shares (every ``n``-th model of a call), one
-    share a worker process (:class:`Workers`): the result does not depend on the number of workers
-    or on scheduling.  Where a worker is lost (out of memory, say), it goes on in this process.
+    """Runs a stage over the models, each on the worker process that holds it (:class:`Workers`):
+    model ``i`` of ``held`` belongs to worker ``i % workers``, which alone prepares it (``prepare``,
+    when it starts) and so holds its fields and trees, as a cluster's workers hold their shards.  The
+    result does not depend on the number of workers or on scheduling.  Where a worker is lost (out
+    of memory, say), it goes on in this process.
 
     Processes, not threads: the exact closest-point queries hold Python's global lock."""
 
-    def __init__(self, held: Held, workers: int):
+    def __init__(self, held: Held, workers: int, *, prepare: Callable | None = None):
         self.held = held
         self.workers = workers
-        self.pool: Workers | None = Workers(held, workers, start=_one_thread)
+        self.pool: Workers | None = Workers(held, workers,
+                                            start=lambda state, rank: _start(prepare, state, rank, workers))
+        try:
+            self.pool.each(_ready, [()] * workers)        # prepared before the first touch, as in one process
+        except WorkerLost:
+            self.pool = None
 
     def map(self, stage, indices, *args, items=None) -> list:
         indices = list(indices)
-        if self.pool is None or len(indices) < 2:
+        if self.pool is None or not indices:
             return Serial(self.held).map(stage, indices, *args, items=items)
+        items = None if items is None else list(items)
         n = self.workers
-        shares = [(indices[k::n], args + (() if items is None else (list(items)[k::n],))) for k in range(n)]
+        shares = [[p for p, i in enumerate(indices) if i % n == k] for k in range(n)]
+        calls = [None if not share else
+                 (stage, [indices[p] for p in share], args + (() if items is None else ([items[p] for p in share],)))
+                 for share in shares]
         try:
-            parts = self.pool.each(_stage, [(stage, share, a) for share, a in shares if share])
+            parts = self.pool.each(_stage, calls)
         except WorkerLost:                           # a worker died (e.g. out of memory): go on without
             self.pool = None
             return Serial(self.held).map(stage, indices, *args, items=items)
         out = [None] * len(indices)
-        for k, part in enumerate(parts):
-            out[k::self.workers] = part
+        for share, part in zip(shares, parts):
+            for p, found in zip(share, part or ()):
+                out[p] = found
         return out
 
     def close(self) -> None:

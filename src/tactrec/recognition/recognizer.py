@@ -92,7 +92,9 @@ class Recognizer:
         ``"fast"`` (the default) or ``"paper"``.
     workers : int
         Processes a method's stages run in (1: this process; the result is the same).  Forked
-        once, after the models are prepared, and ended by :meth:`close` or the ``with`` block.
+        once, and ended by :meth:`close` or the ``with`` block; model ``i`` belongs to worker
+        ``i % workers``, which alone prepares it and runs its stages (:class:`~tactrec.runner.Pool`),
+        so that each process holds its own share of the fields and trees.
     window, degree, curvature_method
         Passed to :func:`tactrec.estimation.estimate`.
     unknown_prior : float
@@ -103,8 +105,8 @@ class Recognizer:
         this method; None: a database's own, where it holds one; False: none, ``unknown`` from the
         fit test alone.
     tips : iterable of float
-        Radii of round tips (the models' units) whose offset fields every mesh prepares now, before
-        the workers fork (:mod:`tactrec.surfaces.mesh_offset`: read from the stored fields up to
+        Radii of round tips (the models' units) whose offset fields every mesh prepares with it
+        (:mod:`tactrec.surfaces.mesh_offset`: read from the stored fields up to
         10 mm, built beyond), so that no recognition reads or builds them.
     cluster : tactrec.cluster.Cluster, optional
         Run the stages on a Dask cluster's workers instead (:func:`tactrec.cluster.connect`; the
@@ -132,14 +134,19 @@ class Recognizer:
 
         self.chance = chosen(self.models, chance, self.method.name, stored)
         self._by_name = {entry.name: entry for entry in self.models}
+        self._number = {entry.name: i for i, entry in enumerate(self.models)}
         self.estimation = dict(window=window, degree=degree, curvature_method=curvature_method)
         tips = tuple(float(r) for r in tips)
         if not all(np.isfinite(r) and r > 0 for r in tips):
             raise InputError(f"a tip radius is a positive number (got {tips})", "tips")
-        for entry in self.models if cluster is None else ():     # on a cluster, its workers prepare their shards
+        def prepare(entry) -> None:
             self.method.prepare(entry.model)
             for r in tips if entry.model.kind == "mesh" else ():
                 entry.model.offset(float(r)).distance_field
+
+        pooled = cluster is None and int(workers) >= 2 and can_fork()
+        for entry in self.models if cluster is None and not pooled else ():   # else its workers prepare their own
+            prepare(entry)
         if self.method.uses_engine and cluster is None:
             from ..engine.kernels import warm
 
@@ -154,7 +161,7 @@ class Recognizer:
             self.runner = cluster.runner(self.models, method=self.method.name, tips=tips)
             return
         held = Held(self.models)
-        self.runner = Pool(held, int(workers)) if int(workers) >= 2 and can_fork() else Serial(held)
+        self.runner = Pool(held, int(workers), prepare=prepare) if pooled else Serial(held)
 
     def __enter__(self) -> "Recognizer":
         return self
@@ -232,7 +239,7 @@ class Recognizer:
         ranking = sorted(outcome.ranking, key=_rank_key)
         ok = [r for r in ranking if r.ok]
         limit = max(fit_limit(touch, self.floor), touch.fit)
-        found = evidence([r.model for r in ok], [self._residuals(r, touch) for r in ok],
+        found = evidence([r.model for r in ok], self._residuals_of(ok, touch),
                          [len(c) for c in touch.joint_curves], touch.noise, limits=(limit,),
                          resolution=resolution(touch, self.floor), radii=(touch.radius,),
                          tied=self._tied(ok, touch, limit, outcome.settled))
@@ -268,11 +275,20 @@ class Recognizer:
         :data:`FLOOR` for a method without one."""
         return float(getattr(self.config, "floor", FLOOR))
 
+    def _residuals_of(self, found: list[Registration], touch: Touch) -> list[np.ndarray]:
+        """The data's signed distances (data units) to the model of each registration of ``found``
+        under its pose (to the model offset by each point's tip: :mod:`tactrec.tip`), computed where
+        the models are held (:func:`residual_stage`)."""
+        return self.runner.map(residual_stage, [self._number[r.model] for r in found], touch, items=found)
+
     def _residuals(self, r: Registration, touch: Touch) -> np.ndarray:
-        """The data's signed distances (data units) to the model of ``r`` under its pose (to the model
-        offset by each point's tip: :mod:`tactrec.tip`)."""
-        model = touch.in_units(r.scale).exact(self._by_name[r.model].model)
-        return residuals(model, r.rotation, r.translation, touch.joint_points, r.scale)
+        return self._residuals_of([r], touch)[0]
+
+
+def residual_stage(held, indices, touch: Touch, found: list[Registration]) -> list[np.ndarray]:
+    """A runner's stage: :meth:`Recognizer._residuals_of` for the models ``indices`` of ``held``."""
+    return [residuals(touch.in_units(r.scale).exact(held.entries[i].model), r.rotation, r.translation,
+                      touch.joint_points, r.scale) for i, r in zip(indices, found)]
 
 
 def recognize(data: TactileData, models: Iterable[ModelEntry], *, method: str = DEFAULT_METHOD, workers: int = 1,
