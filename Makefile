@@ -33,8 +33,9 @@ install-baselines: | $(BIN)/python
 demo: install
 	$(BIN)/tactrec demo
 
+# a module's tests on one worker, so that its shared fixtures (models, tables, calibrations) are built once
 test: install-test
-	$(BIN)/python -m pytest -n 2 -q
+	$(BIN)/python -m pytest -n 2 --dist loadscope -q
 
 # the edit loop: the layout, the docs, the surfaces, the estimate, the steps, the field, the paper's
 # registration, recognition rates, the curves' meeting and the service (about 2 minutes on 2 cores);

@@ -189,7 +189,7 @@ def test_bench_paper_fig11_shares_walks_across_deltas(tmp_path):
 
 @pytest.mark.slow
 def test_closed_form_and_ycb_database_built_once_used_and_updated(tmp_path, capsys):
-    """All closed-form built-ins plus the ten YCB scans (as files, in metres) in one
+    """All closed-form built-ins plus four YCB scans (as files, in metres) in one
     database: built once, used by ``recognize --db`` on many touches, and after one
     scan changes only that scan is rebuilt."""
     import trimesh
@@ -197,18 +197,18 @@ def test_closed_form_and_ycb_database_built_once_used_and_updated(tmp_path, caps
     from tactrec.surfaces import BUILTIN_SETS, builtin_path
 
     scans = []
-    for name in BUILTIN_SETS["paper-fig11"]:
+    for name in ("banana", "apple", "pear", "mug"):
         scans.append(tmp_path / f"{name}.stl")
         shutil.copy(builtin_path(name), scans[-1])
     db = tmp_path / "db"
     assert main(["build", "closed-form", *map(str, scans), "--units", "m", "--out", str(db)]) == 0
-    assert "18 built, 0 unchanged" in capsys.readouterr().out
+    assert "12 built, 0 unchanged" in capsys.readouterr().out
     touches = []
     for k, name in enumerate(BUILTIN_SETS["paper-table1"]):
         touches.append(tmp_path / f"touch-{name}.json")
         assert main(["simulate", name, "--out", str(touches[-1]), "--spacing", "0.02", "--noise", "0.0005",
                      "--seed", str(k), "--quiet"]) == 0
-    for scan, vertex in ((scans[0], 1580), (scans[4], 3475)):                      # banana, mug
+    for scan, vertex in ((scans[0], 1580), (scans[3], 3475)):                      # banana, mug
         # P3 settings in the scans' units: 81 points 0.3 mm apart
         touches.append(tmp_path / f"touch-{scan.stem}.json")
         assert main(["simulate", str(scan), "--units", "m", "--vertex", str(vertex), "--points", "81",
@@ -218,16 +218,16 @@ def test_closed_form_and_ycb_database_built_once_used_and_updated(tmp_path, caps
     results = [json.loads(line) for line in capsys.readouterr().out.strip().splitlines()]
     assert [r["file"] for r in results] == list(map(str, touches))
     for r, t in zip(results, touches):
-        assert len(r["ranking"]) == 18
+        assert len(r["ranking"]) == 12
         assert r["best"] == t.stem.removeprefix("touch-")
     # the meshes are in metres: the default lookup tolerance is the paper's 0.03 /mm = 30 /m
     assert all(r["ranking"][0]["candidates"] > 0 for r in results[-2:])
     # one scan changes (same shape written as ASCII STL): only it is rebuilt
-    changed = trimesh.load(scans[3], force="mesh")
-    changed.export(scans[3], file_type="stl_ascii")
+    changed = trimesh.load(scans[2], force="mesh")
+    changed.export(scans[2], file_type="stl_ascii")
     assert main(["build", "closed-form", *map(str, scans), "--units", "m", "--out", str(db)]) == 0
     out = capsys.readouterr().out
-    assert "1 built, 17 unchanged" in out and f"built    {scans[3].stem}" in out
+    assert "1 built, 11 unchanged" in out and f"built    {scans[2].stem}" in out
 
 
 def test_bench_paper_table5_fills_every_cell_and_tells_the_sphere_apart(tmp_path):
