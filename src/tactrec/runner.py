@@ -1,5 +1,6 @@
-"""Where a recognition's per-model stages run: in this process, or dealt into fixed shares over
-worker processes forked with the models (:class:`~tactrec.recognition.Recognizer`'s ``runner``).
+"""Where a recognition's per-model stages run: in this process, or on worker processes forked with
+the models, each of which prepares and runs its own fixed share (:class:`Pool`; the
+:class:`~tactrec.recognition.Recognizer`'s ``runner``).
 
 :class:`Workers` is the one pool of the package: processes forked with what they hold (the models,
 passed to the process function, not kept in a global), each served over a pipe of its own.  A

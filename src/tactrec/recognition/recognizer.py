@@ -1,7 +1,7 @@
 """The one path from a touch to a result (paper Section 3.3): :class:`Recognizer`.
 
-A :class:`Recognizer` holds the models, prepared once, and the worker
-processes a method's stages run in; :func:`recognize` is the one-off call,
+A :class:`Recognizer` holds the models, each prepared once (by the worker
+process that runs its stages, where there are workers); :func:`recognize` is the one-off call,
 in this process.  A recognition of tactile data:
 
 1. refuses a touch in the wrong units (:func:`check_scale`);
