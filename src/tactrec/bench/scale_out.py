@@ -15,8 +15,10 @@ mesh.  Each size runs in its own :class:`~tactrec.recognition.Recognizer`
 
 Reported per size: top-1 and top-3 over the touches, how many wrong answers
 name a near twin of the touched mesh (its own family: counted wrong, and
-shown on its own), median / p95 / max seconds, and the peak resident memory
-of this process and of its largest worker during that size's run.
+shown on its own), median / p95 / max seconds, the peak resident memory
+of this process and of its largest worker during that size's run, and what
+they hold of the machine together at its end (their proportional set sizes
+summed: pages shared by fork counted once).
 
 With ``--cluster local:1,local:2`` (any comma-separated cluster addresses,
 :mod:`tactrec.cluster`) the same touches are first recognised on each
@@ -83,6 +85,19 @@ def _peak(pid: int | str = "self") -> float:
             return next(int(line.split()[1]) for line in handle if line.startswith("VmHWM:")) / 1024.0
     except (OSError, StopIteration, ValueError):
         return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def _proportional(pids) -> float:
+    """The proportional set sizes (MB) of processes ``pids`` summed (``Pss``: a page shared by n
+    processes counts 1/n in each), what they hold of the machine's memory together; 0 where unread."""
+    total = 0.0
+    for pid in pids:
+        try:
+            with open(f"/proc/{pid}/smaps_rollup") as handle:
+                total += next(int(line.split()[1]) for line in handle if line.startswith("Pss:")) / 1024.0
+        except (OSError, StopIteration, ValueError):
+            return 0.0
+    return total
 
 
 def place_rank(index, touch, size: int, k: int, model, vertex: int) -> int | None:
@@ -206,8 +221,10 @@ def run(*, out, instances: int = 20, seed: int = 0, jobs: int | None = None, qui
         with Recognizer(entries[:size], workers=default_workers()) as recognizer:
             row = _size(recognizer, entries, size, touched, touches, len(scans))
             pool = getattr(recognizer.runner, "pool", None)
-            workers = [_peak(pid) for pid in (pool.pids if pool is not None else [])]
-        row["peak_mb"] = {"process": _peak(), "largest_worker": max(workers, default=0.0)}
+            pids = pool.pids if pool is not None else []
+            workers = [_peak(pid) for pid in pids]
+            together = _proportional(["self", *pids])
+        row["peak_mb"] = {"process": _peak(), "largest_worker": max(workers, default=0.0), "all_pss": together}
         table["sizes"][str(size)] = row
     for runs in table["clusters"].values():
         for size, row in runs.items():
@@ -225,14 +242,15 @@ def _text(table: dict, seed: int, instances: int) -> str:
              "and its two workers per catalogue size", "",
              "| models | touches | top-1 | top-3 | near-twin confusions | median s | p95 s | max s | "
              "same scan touches: median s | true place's rank in the index: median / p90 / in the first round | "
-             "peak MB (process / worker) |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+             "peak MB (process / worker) | MB of all processes at the end (proportional) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for size, s in table["sizes"].items():
         a, y, m = s["all"], s["scans"], s["peak_mb"]
         lines.append(f"| {size} | {a['touches']} | {a['top1_percent']:.1f}% | {a['top3_percent']:.1f}% | "
                      f"{a['twin_confusions']} | {a['median_seconds']:.2f} | {a['p95_seconds']:.2f} | "
                      f"{a['max_seconds']:.2f} | {y['median_seconds']:.2f} | {a['place_rank_median']:.0f} / "
                      f"{a['place_rank_p90']:.0f} / {a['place_in_first_round_percent']:.0f}% | {m['process']:.0f} / "
-                     f"{m['largest_worker']:.0f} |")
+                     f"{m['largest_worker']:.0f} | {m.get('all_pss', 0.0):.0f} |")
     for address, runs in table["clusters"].items():
         lines += ["", f"On the cluster {address} (this process its client, holding the models without their "
                       "distance fields):", "",
