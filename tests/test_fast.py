@@ -171,14 +171,13 @@ def test_each_worker_holds_only_its_own_share_of_the_models():
     """Two workers: each prepares (holds the distance field and tree of) only its own half of the
     models, and this process, which searches in neither, holds none after a recognition."""
     from conftest import small_meshes
-    from tactrec.runner import Workers
 
     models = small_meshes()
     touch = simulate_touch(models[3].model, [800], points=61, spacing=0.3, angle=45.0, rng=4)
     with Recognizer(models, workers=2) as recognizer:
         assert recognizer.recognize(touch).best == "ring"
         everything = list(range(len(models)))
-        held = Workers.each(recognizer.runner.pool, _prepared, [(everything,), (everything,)])
+        held = recognizer.runner.pool.each(_prepared, [(everything,), (everything,)])
         assert not any(_prepared(recognizer.runner.held, everything))
     assert [i for i, p in enumerate(held[0]) if p] == everything[0::2]
     assert [i for i, p in enumerate(held[1]) if p] == everything[1::2]

@@ -133,7 +133,6 @@ class Recognizer:
         from ..chance import chosen
 
         self.chance = chosen(self.models, chance, self.method.name, stored)
-        self._by_name = {entry.name: entry for entry in self.models}
         self._number = {entry.name: i for i, entry in enumerate(self.models)}
         self.estimation = dict(window=window, degree=degree, curvature_method=curvature_method)
         tips = tuple(float(r) for r in tips)
@@ -209,7 +208,7 @@ class Recognizer:
         check_scale(data, self.models)
         chosen = None
         if among is not None:
-            unknown = sorted(set(among) - set(self._by_name))
+            unknown = sorted(set(among) - set(self._number))
             if unknown:
                 raise InputError(f"no model named {unknown[0]!r} among the recognizer's", "among")
             chosen = [i for i, entry in enumerate(self.models) if entry.name in set(among)]
