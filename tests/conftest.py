@@ -20,20 +20,26 @@ def scans():
     return build_entries(["banana", "mug", "pear", "hammer"])
 
 
-def small_meshes():
+def small_meshes(*, coarse: bool = False):
     """Four small meshes (mm) of distinct shapes, for searches every vertex of which is affordable:
-    an egg (an ellipsoid), a capsule, a brick and a ring (a torus), with their lookup tables."""
+    an egg (an ellipsoid), a capsule, a brick and a ring (a torus), with their lookup tables;
+    ``coarse``: about a third of the vertices (edges of 4-5 mm), for a search of every vertex at
+    every turn."""
     import trimesh
 
     from tactrec.recognition import ModelEntry
     from tactrec.surfaces.mesh import MeshModel
     from tactrec.tables import CurvatureTable
 
+    brick = trimesh.creation.box(extents=(40.0, 30.0, 20.0))
+    for _ in range(3 if coarse else 4):
+        brick = brick.subdivide()
     shapes = {
-        "egg": trimesh.creation.icosphere(subdivisions=4, radius=1.0).apply_scale([30.0, 24.0, 18.0]),
-        "capsule": trimesh.creation.capsule(height=40.0, radius=12.0, count=[40, 40]),
-        "brick": trimesh.creation.box(extents=(40.0, 30.0, 20.0)).subdivide().subdivide().subdivide().subdivide(),
-        "ring": trimesh.creation.torus(major_radius=22.0, minor_radius=8.0, major_sections=72, minor_sections=32),
+        "egg": trimesh.creation.icosphere(subdivisions=3 if coarse else 4, radius=1.0).apply_scale([30.0, 24.0, 18.0]),
+        "capsule": trimesh.creation.capsule(height=40.0, radius=12.0, count=[24, 24] if coarse else [40, 40]),
+        "brick": brick,
+        "ring": trimesh.creation.torus(major_radius=22.0, minor_radius=8.0, major_sections=48 if coarse else 72,
+                                       minor_sections=20 if coarse else 32),
     }
     out = []
     for name, mesh in shapes.items():

@@ -141,10 +141,13 @@ def _small_touches(small, count, *, noise=0.0, outward=True):
     return touches
 
 
-def test_fast_against_an_exhaustive_search_on_small_meshes(small):
-    """20 seeded touches on four small meshes: the exhaustive search (every vertex, every 30
+def test_fast_against_an_exhaustive_search_on_small_meshes():
+    """20 seeded touches on four small coarse meshes: the exhaustive search (every vertex, every 30
     degrees) is the reference.  ``fast`` is right at least as often, and on at least 18 of the
     20 its best error is within 10% (or 0.002 mm) of the exhaustive one's or lower."""
+    from conftest import small_meshes
+
+    small = small_meshes(coarse=True)
     touches = _small_touches(small, 5, noise=0.02)
     with Recognizer(small) as fast, Recognizer(small, exhaustive=True, refine=64) as exhaustive:
         pairs = [(name, fast.recognize(t), exhaustive.recognize(t)) for name, t in touches]
