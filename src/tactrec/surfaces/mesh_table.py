@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..linalg import dot3
 from .base import TableSamples
 from .mesh_curvature import paraboloid_curvatures
 
@@ -22,33 +21,15 @@ def sample_vertices(model, *, theta: float = np.pi / 8, max_ring: int = 6, min_r
     marked, mark them all and keep ``v``.  Until half of the vertices are
     marked (or every vertex has been tried once).
     """
-    rng = np.random.default_rng(rng)
-    n = len(model.vertices)
-    marked = np.zeros(n, dtype=bool)
-    count = 0
-    samples = []
-    cos_theta = np.cos(theta)
-    vf = model.vertex_faces
-    normals = model.vertex_normals
-    fn = model.face_normals
-    for v in rng.permutation(n):
-        if count >= n / 2:
-            break
-        if marked[v]:
-            continue
-        levels = model.rings(int(v), max_ring)
-        ring = len(levels) - 1
-        while True:
-            members = np.concatenate(levels[: ring + 1])
-            faces = np.unique(vf[members].indices)
-            if ring <= min_ring or np.min(dot3(fn[faces], normals[v])) >= cos_theta:
-                break
-            ring -= 1
-        if not marked[members].any():
-            marked[members] = True
-            count += len(members)
-            samples.append(int(v))
-    return np.array(samples, dtype=np.int64)
+    from .table_kernels import sample_in_order              # numba: only once a table is made
+
+    order = np.random.default_rng(rng).permutation(len(model.vertices))
+    adjacency, incidence = model.adjacency, model.vertex_faces.tocsr()
+    return sample_in_order(order.astype(np.int64), adjacency.indptr.astype(np.int64), adjacency.indices.astype(np.int64),
+                           incidence.indptr.astype(np.int64), incidence.indices.astype(np.int64),
+                           np.ascontiguousarray(model.face_normals, dtype=np.float64),
+                           np.ascontiguousarray(model.vertex_normals, dtype=np.float64), float(np.cos(theta)),
+                           int(max_ring), int(min_ring))
 
 
 def vertex_curvatures(model, vertices, *, sizes=(30, 40, 50, 60, 70), ring: int = 6):
