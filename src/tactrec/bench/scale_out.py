@@ -18,7 +18,10 @@ name a near twin of the touched mesh (its own family: counted wrong, and
 shown on its own), median / p95 / max seconds, the peak resident memory
 of this process and of its largest worker during that size's run, and what
 they hold of the machine together at its end (their proportional set sizes
-summed: pages shared by fork counted once).
+summed: pages shared by fork counted once).  Each touch's record also holds
+its search's work (closest-point queries), the deepest tier it reached,
+whether it settled, and where the index ranked its true place
+(:func:`place_rank`).
 
 With ``--cluster local:1,local:2`` (any comma-separated cluster addresses,
 :mod:`tactrec.cluster`) the same touches are first recognised on each
@@ -126,7 +129,8 @@ def _outcome(rec, name: str, family, place: int | None) -> dict:
     twin = rec.best not in (None, name) and family(name) is not None and family(rec.best) == family(name)
     return {"model": name, "recognized": rec.best, "rank": ok.index(name) + 1 if name in ok else None,
             "twin": bool(twin), "seconds": rec.seconds, "ambiguous": rec.ambiguous, "settled": rec.settled,
-            "place_rank": place, "answer": digest(without_timings(rec.to_json()))}
+            "work": rec.work, "depth": rec.depth, "place_rank": place,
+            "answer": digest(without_timings(rec.to_json()))}
 
 
 def _summary(rows: list[dict]) -> dict:
@@ -146,13 +150,24 @@ def _summary(rows: list[dict]) -> dict:
             "place_in_first_round_percent": 100.0 * float(np.mean(places <= FastConfig.index_round))}
 
 
+def scan_picks(scans: int, instances: int, seed: int) -> list[int]:
+    """The scans (indices among ``scans`` of them) this bench touches with ``instances`` touches a set and
+    ``seed``: the draw :func:`_touches` makes."""
+    return _picks(scans, 0, instances, seed)[0]
+
+
+def _picks(scans: int, generated: int, instances: int, seed: int) -> tuple[list[int], list[int]]:
+    rng = instance_rng(seed, 1_078)
+    on_scans = [int(i) for i in rng.choice(scans, size=min(instances, scans), replace=False)]
+    if not generated:
+        return on_scans, []
+    return on_scans, [scans + int(i) for i in rng.choice(generated, size=min(instances, generated), replace=False)]
+
+
 def _touches(scans, generated, instances: int, seed: int) -> tuple[list[int], dict]:
     """The touched models (indices into the scans then the generated meshes) and their P3 touches, each
     ``(vertex, data)``."""
-    rng = instance_rng(seed, 1_078)
-    on_scans = [int(i) for i in rng.choice(len(scans), size=min(instances, len(scans)), replace=False)]
-    on_generated = [len(scans) + int(i) for i in rng.choice(len(generated), size=min(instances, len(generated)),
-                                                             replace=False)]
+    on_scans, on_generated = _picks(len(scans), len(generated), instances, seed)
     entries = list(scans) + list(generated)
     return on_scans + on_generated, {k: vertex_touch(entries[k], k, 0, seed) for k in on_scans + on_generated}
 
