@@ -353,7 +353,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "readings of the paper "
                         "(e.g. parabola_points=3, phi_step=5); repeatable")
     p.add_argument("--sets", type=lambda text: text.split(","), metavar="SET,...",
-                   help="calibration (hard, p3-78), multi-touch (hard-10, p3-78, similar), open-world and sensor "
+                   help="calibration (hard, p3-78), multi-touch (hard-10, p3-78, similar, near-duplicates; "
+                        "catalogue, 1,078 models, only when named), open-world and sensor "
                         "(fig11, other; open-world also cad): which sets to run (default all)")
     p.add_argument("--strategies", type=lambda text: text.split(","), metavar="NAME,...",
                    help="multi-touch: which next-touch strategies to run (random, next; default both)")

@@ -43,6 +43,15 @@ answer.  Sets:
     instances and the copy in odd ones, the first touch ``hard-10``'s within
     reach of the bump but clear of it: only a touch of the bump tells them
     apart; ``instances`` sessions per scan.
+``catalogue``
+    ``p3-78``'s sessions against the 1,078 models of ``tactrec bench
+    scale-out`` (the 78 scans and 1,000 generated meshes,
+    :mod:`tactrec.bench.scale_out`): one session on each of ``instances``
+    seeded scans (drawn as that bench draws its scans), the first touch
+    searched over the whole catalogue and each later one among the models
+    its earlier touches left standing (:mod:`tactrec.session`).  Run only
+    when named (:data:`DEFAULT_SETS`); its models are held by one process
+    (and its workers): run it with ``--jobs 1``.
 
 The probabilities of ``hard-10`` and ``near-duplicates`` come with their
 database's null model of chance fits (:mod:`tactrec.chance`, fitted once on
@@ -95,9 +104,11 @@ from . import multi_touch_report as report
 from .common import (CORE_SOURCES, database, instance_rng, null_model, random_face_site, recognizer, run_parallel,
                      saved_record, simulate, sources_hash, vertex_touch, write_json, ycb_database)
 
-__all__ = ["run", "SETS", "TOUCHES", "STRATEGIES", "SIMILAR", "similar_scans", "shape_signature"]
+__all__ = ["run", "SETS", "DEFAULT_SETS", "TOUCHES", "STRATEGIES", "SIMILAR", "similar_scans", "shape_signature"]
 
-SETS = ("hard-10", "p3-78", "similar", "near-duplicates")
+SETS = ("hard-10", "p3-78", "similar", "near-duplicates", "catalogue")
+#: the sets run when none is named: all but ``catalogue`` (1,078 models, about 6 GB and half an hour)
+DEFAULT_SETS = SETS[:4]
 #: scans in a ``similar`` session's database: the touched one and those most alike in shape
 SIMILAR = 4
 STRATEGIES = ("random", "next")
@@ -107,7 +118,8 @@ RADIUS = 40.0
 SPECS = {"hard-10": {"length": 12.0, "angle": 30.0, "noise": 0.05, "outward": False},
          "similar": {"length": 12.0, "angle": 30.0, "noise": 0.05, "outward": False},
          "near-duplicates": {"length": 12.0, "angle": 30.0, "noise": 0.05, "outward": False},
-         "p3-78": {"length": 24.0, "angle": 60.0, "noise": 0.0, "outward": True}}
+         "p3-78": {"length": 24.0, "angle": 60.0, "noise": 0.0, "outward": True},
+         "catalogue": {"length": 24.0, "angle": 60.0, "noise": 0.0, "outward": True}}
 SPACING = 0.3
 #: the sets whose databases have their null model of chance fits (:mod:`tactrec.chance`); the others'
 #: probabilities come from the fit test alone (a database per session, or 78 scans to calibrate)
@@ -123,7 +135,8 @@ def code_hash(strategy: str) -> str:
     to :mod:`tactrec.proposal` reruns ``next``'s sessions alone."""
     proposal = ("proposal",) if strategy == "next" else ()
     return sources_hash(*CORE_SOURCES, "session", *proposal, "probability.py", "bench/multi_touch.py",
-                        "bench/fast_vs_paper.py", "bench/common.py", "bench/scale.py", "bench/near_duplicates.py")
+                        "bench/fast_vs_paper.py", "bench/common.py", "bench/scale.py", "bench/near_duplicates.py",
+                        "bench/scale_out.py", "bench/catalogue.py")
 
 
 def shape_signature(model) -> np.ndarray:
@@ -149,7 +162,7 @@ def similar_scans(entries, m_index: int, count: int = SIMILAR) -> list[int]:
 
 #: a cache: each scan's shape signature, by name
 _SIGNATURE_CACHE: dict = {}
-#: a cache: each near-duplicates pair, by scan
+#: a cache: each near-duplicates pair, by scan (and the catalogue set's models)
 _FAMILY_CACHE: dict = {}
 
 
@@ -173,10 +186,22 @@ def _first(kind: str, m_index: int, instance: int, seed: int):
         return entries, entry, first
     db = ycb_database()
     entry = db.entries[m_index]
+    if kind == "catalogue":
+        return _catalogue(), entry, vertex_touch(entry, m_index, instance, seed)[1]
     if kind == "similar":
         chosen = [db.entries[i] for i in similar_scans(db.entries, m_index)]
         return chosen, entry, simulate(entry, m_index, instance, seed, "hard")[1]
     return db.entries, entry, vertex_touch(entry, m_index, instance, seed)[1]
+
+
+def _catalogue() -> list:
+    """The 1,078 models of ``tactrec bench scale-out``: the 78 scans, then the generated meshes (loaded
+    once, kept for the rest of this process)."""
+    if "catalogue" not in _FAMILY_CACHE:
+        from .scale_out import GENERATED, catalogue_entries
+
+        _FAMILY_CACHE["catalogue"] = list(ycb_database().entries) + list(catalogue_entries(GENERATED))
+    return _FAMILY_CACHE["catalogue"]
 
 
 def next_touch(strategy, session, entry, world2model, spec, rng):
@@ -307,7 +332,7 @@ def merged(records: list[dict]) -> list[dict]:
     return list(rows.values())
 
 
-def run(*, out, instances: int = 10, seed: int = 0, jobs: int | None = None, quiet: bool = False, sets=SETS,
+def run(*, out, instances: int = 10, seed: int = 0, jobs: int | None = None, quiet: bool = False, sets=DEFAULT_SETS,
         strategies=STRATEGIES, **_ignored) -> dict:
     """Run the sessions of ``sets`` with each of ``strategies``; write ``multi-touch.json``, ``.md``
     and the plots.  Each strategy's sessions are saved apart, under a hash of the sources that
@@ -328,6 +353,10 @@ def run(*, out, instances: int = 10, seed: int = 0, jobs: int | None = None, qui
     for kind in ("p3-78", "similar"):
         if kind in sets:
             tasks += [(kind, m, i, seed) for m in range(len(ycb_names())) for i in range(math.ceil(instances / 10))]
+    if "catalogue" in sets:                          # the scans scale-out draws, one session each
+        from .scale_out import scan_picks
+
+        tasks += [("catalogue", m, 0, seed) for m in scan_picks(len(ycb_names()), instances, seed)]
     jobs_ = [(t + (strategy,), folders[strategy]) for t in tasks for strategy in strategies]
     for kind, m in sorted({t[:2] for t in tasks if t[0] in CALIBRATED}):       # fitted once, before the workers
         _null(kind, _first(kind, m, 0, seed)[0])
