@@ -1,7 +1,9 @@
 """What every compiled kernel of the package shares: numba's threading layer.
 
 The kernels (:mod:`tactrec.surfaces.field_kernels`, :mod:`tactrec.registration.step`,
-:mod:`tactrec.registration.anderson`, :mod:`tactrec.engine.kernels`, :mod:`tactrec.index.kernels`)
+:mod:`tactrec.registration.anderson`, :mod:`tactrec.registration.closedform_paper`,
+:mod:`tactrec.surfaces.table_kernels`,
+:mod:`tactrec.engine.kernels`, :mod:`tactrec.index.kernels`)
 are compiled by numba, cached on disk, without ``fastmath``.  A
 :class:`~tactrec.recognition.Recognizer` forks its worker processes after its kernels ran once,
 and GNU OpenMP, one of numba's default threading layers, ends a process forked after it ran.  So

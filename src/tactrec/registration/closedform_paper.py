@@ -25,7 +25,9 @@ data's radius), so one step length means the same on every parametrisation.
 from __future__ import annotations
 
 import numpy as np
+from numba import njit, prange
 
+from ..compiled import fork_safe
 from ..estimation import LocalGeometry
 from ..linalg import compose, rotate, times
 from ..surfaces.closedform import ClosedFormSurface
@@ -33,6 +35,8 @@ from ..tables import CurvatureTable
 from .result import Registration, local_frame, rotations_z
 
 __all__ = ["register", "Superposition", "DEFAULTS"]
+
+fork_safe()
 
 DEFAULTS = {
     "delta": 0.2,           # lookup tolerance, 1/model units (eq. 7)
@@ -205,10 +209,18 @@ class Superposition:
         return uv, np.mod(phi, 2 * np.pi), E
 
 
+@njit(cache=True, parallel=True)
 def _apply(frame: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """``frame[m] @ w[m, n]`` for ``frame (m, 3, 3)`` and ``w (m, n, 3)``."""
-    return (frame[:, None, :, 0] * w[..., 0:1] + frame[:, None, :, 1] * w[..., 1:2]
-            + frame[:, None, :, 2] * w[..., 2:3])
+    """``frame[m] @ w[m, n]`` for ``frame (m, 3, 3)`` and ``w (m, n, 3)``: each entry's three products
+    summed left to right, as numpy's element-wise form does (the same bits; compiled, as the
+    descent's arrays make it its costliest step)."""
+    m, n = w.shape[0], w.shape[1]
+    out = np.empty((m, n, 3))
+    for a in prange(m):
+        for b in range(n):
+            for i in range(3):
+                out[a, b, i] = frame[a, i, 0] * w[a, b, 0] + frame[a, i, 1] * w[a, b, 1] + frame[a, i, 2] * w[a, b, 2]
+    return out
 
 
 def register(model: ClosedFormSurface, table: CurvatureTable, geometry: LocalGeometry, points: np.ndarray, *,
