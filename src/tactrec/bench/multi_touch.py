@@ -118,8 +118,8 @@ RADIUS = 40.0
 SPECS = {"hard-10": {"length": 12.0, "angle": 30.0, "noise": 0.05, "outward": False},
          "similar": {"length": 12.0, "angle": 30.0, "noise": 0.05, "outward": False},
          "near-duplicates": {"length": 12.0, "angle": 30.0, "noise": 0.05, "outward": False},
-         "p3-78": {"length": 24.0, "angle": 60.0, "noise": 0.0, "outward": True},
-         "catalogue": {"length": 24.0, "angle": 60.0, "noise": 0.0, "outward": True}}
+         "p3-78": {"length": 24.0, "angle": 60.0, "noise": 0.0, "outward": True}}
+SPECS["catalogue"] = SPECS["p3-78"]             # the same touches, against the whole catalogue
 SPACING = 0.3
 #: the sets whose databases have their null model of chance fits (:mod:`tactrec.chance`); the others'
 #: probabilities come from the fit test alone (a database per session, or 78 scans to calibrate)

@@ -159,8 +159,6 @@ def scan_picks(scans: int, instances: int, seed: int) -> list[int]:
 def _picks(scans: int, generated: int, instances: int, seed: int) -> tuple[list[int], list[int]]:
     rng = instance_rng(seed, 1_078)
     on_scans = [int(i) for i in rng.choice(scans, size=min(instances, scans), replace=False)]
-    if not generated:
-        return on_scans, []
     return on_scans, [scans + int(i) for i in rng.choice(generated, size=min(instances, generated), replace=False)]
 
 
