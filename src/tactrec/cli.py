@@ -354,8 +354,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "(e.g. parabola_points=3, phi_step=5); repeatable")
     p.add_argument("--sets", type=lambda text: text.split(","), metavar="SET,...",
                    help="calibration (hard, p3-78), multi-touch (hard-10, p3-78, similar, near-duplicates; "
-                        "catalogue, 1,078 models, only when named), open-world and sensor "
-                        "(fig11, other; open-world also cad): which sets to run (default all)")
+                        "catalogue, 1,078 models, only when named), open-world, sensor and patch "
+                        "(fig11, other; open-world also cad; patch also ycb, the 78, only when named): which sets to run")
+    p.add_argument("--radii", type=_positives, metavar="MM,...", help="patch: the patches' radii (default 2,4,6,10)")
+    p.add_argument("--blur", type=float, metavar="MM", help="patch: the gel's blur sigma (default 0)")
     p.add_argument("--strategies", type=lambda text: text.split(","), metavar="NAME,...",
                    help="multi-touch: which next-touch strategies to run (random, next; default both)")
     p.add_argument("--settings", type=lambda text: text.split(","), metavar="NAME,...",

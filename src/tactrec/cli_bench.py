@@ -80,12 +80,13 @@ def cmd_bench(args) -> int:
         from .bench.calibration import SETS as CALIBRATION_SETS
         from .bench.multi_touch import SETS as SESSION_SETS
         from .bench.open_world import EXTRA_SETS, SCAN_SETS
+        from .bench.patch import SETS as PATCH_SETS
         from .bench.sensor import SCAN_SETS as SENSOR_SETS
 
         known = {"calibration": CALIBRATION_SETS, "multi-touch": SESSION_SETS, "open-world": SCAN_SETS + EXTRA_SETS,
-                 "sensor": SENSOR_SETS}.get(args.name)
+                 "sensor": SENSOR_SETS, "patch": PATCH_SETS}.get(args.name)
         if known is None:
-            raise InputError("--sets applies to calibration, multi-touch, open-world and sensor only", args.name)
+            raise InputError("--sets applies to calibration, multi-touch, open-world, sensor and patch only", args.name)
         extra["sets"] = _known(args.sets, known, "set", "--sets", args.name)
     if args.strategies is not None:
         from .bench.multi_touch import STRATEGIES
@@ -100,6 +101,15 @@ def cmd_bench(args) -> int:
             raise InputError("--settings applies to sensor only", args.name)
         extra["settings"] = ("clean",) + tuple(s for s in _known(args.settings, SETTINGS, "setting", "--settings",
                                                                  args.name) if s != "clean")
+    for option, value in (("--radii", args.radii), ("--blur", args.blur)):
+        if value is not None and args.name != "patch":
+            raise InputError(f"{option} applies to patch only", args.name)
+    if args.radii is not None:
+        extra["radii"] = tuple(args.radii)
+    if args.blur is not None:
+        if not args.blur >= 0:
+            raise InputError(f"--blur must be a non-negative number of mm (got {args.blur:g})", args.name)
+        extra["blur"] = float(args.blur)
     if args.against is not None:
         if args.name != "answers":
             raise InputError("--against applies to answers only", args.name)

@@ -13,7 +13,7 @@ def cmd_simulate(args, *, floats) -> int:
     """``tactrec simulate MODEL --out DATA``: a simulated touch, as a real sensor records it with the sensor options."""
     from .io.touch import save_touch
     from .sensor import Imperfections
-    from .simulation import simulate_random_touch, simulate_touch
+    from .simulation import simulate_patch, simulate_random_touch, simulate_touch
     from .surfaces import load_model
 
     model = load_model(args.model, units=args.units, scale=args.scale)
@@ -34,6 +34,10 @@ def cmd_simulate(args, *, floats) -> int:
     options = dict(points=args.points, spacing=spacing, angle=args.angle, curves=args.curves, noise=args.noise,
                    noise_kind=args.noise_kind, outward=not args.no_outward, contact=args.contact,
                    sensor_frame=not args.model_frame, imperfections=imperfections)
+    patch = dict(radius=args.patch, pitch=args.pitch, noise=args.noise, blur=args.blur, depth=args.depth,
+                 sensor_frame=not args.model_frame)
+    if args.patch is None and any(x is not None for x in (args.pitch, args.blur, args.depth)):
+        raise InputError("--pitch, --blur and --depth are for a patch: give --patch RADIUS", "tactrec simulate")
     try:
         if args.at is not None:
             site = model.locate(floats(args.at, 3, "--at"))
@@ -43,8 +47,13 @@ def cmd_simulate(args, *, floats) -> int:
             site = np.array([args.vertex])
         else:
             site = None
-        data = (simulate_touch(model, site, rng=rng, **options) if site is not None
-                else simulate_random_touch(model, rng=rng, **options))
+        if args.patch is not None:
+            patch = {k: v for k, v in patch.items() if v is not None}
+            data = (simulate_patch(model, site, rng=rng, **patch) if site is not None
+                    else simulate_random_touch(model, rng=rng, maker=simulate_patch, **patch))
+        else:
+            data = (simulate_touch(model, site, rng=rng, **options) if site is not None
+                    else simulate_random_touch(model, rng=rng, **options))
     except InputError:
         raise  # already names its argument (--at, --uv)
     except ValueError as exc:
@@ -52,6 +61,10 @@ def cmd_simulate(args, *, floats) -> int:
     save_touch(data, args.out)
     if not args.quiet:
         t = data.meta["truth"]
+        if data.patch is not None:
+            print(f"{args.out}: a patch of {len(data.patch.points)} points, radius {args.patch:g}, pitch "
+                  f"{data.patch.pitch:.4g}, on {model.name} at ({', '.join(f'{x:.4g}' for x in t['contact'])})")
+            return 0
         counts = sorted({len(c) for c in data.curves})
         print(f"{args.out}: {len(data.curves)} curves x {'-'.join(str(n) for n in counts[::max(len(counts) - 1, 1)])} "
               f"points on {model.name} at "
@@ -88,6 +101,13 @@ def add_simulate_parser(sub, *, count, positive, nonnegative, mesh_options):
                         help="how far each curve passes from the contact")
     sensor.add_argument("--bend", type=nonnegative, default=0.0,
                         help="how far each stroke leaves its plane at its ends")
+    gel = p.add_argument_group("a patch, as a vision-based skin records it (model units; --noise: the depth's "
+                               "Gaussian sigma)")
+    gel.add_argument("--patch", type=positive, metavar="RADIUS", help="a height map over a disc of this radius "
+                     "instead of curves")
+    gel.add_argument("--pitch", type=positive, help="the pixels' spacing (default: about 400 pixels in the disc)")
+    gel.add_argument("--blur", type=nonnegative, help="the gel's smoothing, a Gaussian of this sigma (default 0)")
+    gel.add_argument("--depth", type=positive, help="the deepest the sensor sees below its plane (default RADIUS)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     mesh_options(p)
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")

@@ -318,6 +318,9 @@ def estimate(data: TactileData, *, window: int | str | None = "auto", degree: in
     If ``data.outward`` is given, ``N`` points along it; otherwise ``N`` is
     chosen so that the curves bend away from it (a convex guess) and callers
     should also try :meth:`LocalGeometry.flipped`.
+
+    A patch's curves are its spokes; a patch's own geometry, a fit of all its points, is
+    :func:`tactrec.estimation_patch.estimate_patch`.
     """
     contact = data.contact if data.contact is not None else find_contact(data.curves)
     try:

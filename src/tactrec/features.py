@@ -31,6 +31,7 @@ import numpy as np
 
 from .errors import InputError
 from .estimation import LocalGeometry, estimate, noise_level
+from .estimation_patch import estimate_patch, patch_noise
 from .io.touch import TactileData
 from .outliers import kept
 from .tip import EDGE, bends, corrected, offset, surface_curves, traceable
@@ -125,6 +126,9 @@ class Touch:
                   curvature_method: str = "auto") -> "Touch":
         """The touch of ``data``: its points off their curves' traces set aside (:mod:`tactrec.outliers`;
         an :class:`InputError` where too few are left), then the estimate and the noise of those kept."""
+        if data.patch is not None:                 # a patch: its own fit and noise (:mod:`.estimation_patch`)
+            geometry = estimate_patch(data)
+            return cls(data, geometry, 1.0, patch_noise(data.patch)).with_estimate(geometry)
         data, count = kept(data)
         geometry = estimate(data, window=window, degree=degree, method=curvature_method)
         noise = float(np.median([noise_level(np.asarray(c, dtype=np.float64)) for c in data.curves]))

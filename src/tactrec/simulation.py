@@ -26,7 +26,10 @@ from .surfaces.base import SurfaceModel
 
 __all__ = ["simulate_touch", "simulate_random_touch", "random_rigid_motion", "spread_vertices", "sensor_to_world",
            "truth_pose", "truth_contact",
-           "simulate_world_touch"]
+           "simulate_world_touch", "simulate_patch", "PATCH_POINTS"]
+
+#: the pixels a simulated patch holds by default (its pitch follows from its radius)
+PATCH_POINTS = 400
 
 
 def random_rigid_motion(rng, *, extent: float) -> tuple[np.ndarray, np.ndarray]:
@@ -127,9 +130,11 @@ def simulate_touch(model: SurfaceModel, site, *, points: int = 61, spacing: floa
 
 
 def simulate_random_touch(model: SurfaceModel, *, rng=None, attempts: int = 200, margin: float = 0.0,
-                          vertices: bool = False, **options) -> TactileData:
+                          vertices: bool = False, maker=None, **options) -> TactileData:
     """A touch at a random site whose curves all stay on the surface (``vertices``: at a random vertex
-    of a mesh, where a machined part's edges and corners are)."""
+    of a mesh, where a machined part's edges and corners are); ``maker``, the function that makes the
+    touch at a site (:func:`simulate_touch`; :func:`simulate_patch` for a patch)."""
+    maker = simulate_touch if maker is None else maker
     rng = np.random.default_rng(rng)
     last = None
     for _ in range(attempts):
@@ -140,7 +145,7 @@ def simulate_random_touch(model: SurfaceModel, *, rng=None, attempts: int = 200,
         else:
             site = model.random_sites(1, rng=rng)[0]
         try:
-            return simulate_touch(model, site, rng=rng, **options)
+            return maker(model, site, rng=rng, **options)
         except InputError:
             raise                                          # data no place could make valid: not the site's fault
         except ValueError as exc:
@@ -215,3 +220,79 @@ def simulate_world_touch(model: SurfaceModel, world2model, contact, directions, 
     t_sw = rotate(R.T, td - t) / s
     world = data.transformed(np.eye(3), np.zeros(3), scale=1.0 / s)
     return dataclasses.replace(world, meta=data.meta, source=data.source), (R_sw, t_sw)
+
+
+def _first_hits(model, origins: np.ndarray, direction: np.ndarray, length: float, step: float) -> np.ndarray:
+    """How far each ray ``origins (m, 3) + t direction`` runs to its first crossing into the model
+    (its signed distance, :meth:`~tactrec.surfaces.base.SurfaceModel.planes`, turning from positive to
+    not), within ``length``: stepped every ``step``, then bisected; NaN where it never crosses or
+    starts inside."""
+    t = np.arange(0.0, length + step, step)
+    values = np.stack([model.planes(origins + ti * direction)[0] for ti in t], axis=1)     # (m, len(t))
+    inside = values <= 0
+    first = np.argmax(inside, axis=1)
+    ok = inside.any(axis=1) & (first > 0)
+    lo, hi = np.where(ok, t[np.maximum(first - 1, 0)], np.nan), np.where(ok, t[first], np.nan)
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        out = np.zeros(len(mid), dtype=bool)
+        out[ok] = model.planes(origins[ok] + mid[ok, None] * direction)[0] > 0
+        lo, hi = np.where(out, mid, lo), np.where(out, hi, mid)
+    return 0.5 * (lo + hi)
+
+
+def simulate_patch(model: SurfaceModel, site, *, radius: float, pitch: float | None = None, noise: float = 0.0,
+                   blur: float = 0.0, depth: float | None = None, sensor_frame: bool = True,
+                   units: str | None = None, rng=None) -> TactileData:
+    """A patch at ``site`` of ``model`` as a vision-based skin records it: a depth map over the
+    tangent plane at the site (its x axis turned at random about the normal), ``pitch`` apart
+    (default: about :data:`PATCH_POINTS` pixels in the disc), over a disc of ``radius``; each pixel
+    the depth along the sensor's -z to the first surface it meets, null where none lies within
+    ``depth`` below the plane (default ``radius``) or the pixel is beyond the disc; the gel's
+    smoothing a Gaussian of sigma ``blur`` (model units, over the pixels seen), then Gaussian depth
+    noise of sigma ``noise``.  In a random sensor frame unless ``sensor_frame`` is false; the truth
+    as :func:`simulate_touch`'s."""
+    from scipy.ndimage import gaussian_filter
+
+    from .io.patch import MAX_HOLES, parse_patch
+
+    rng = np.random.default_rng(rng)
+    pitch = float(pitch) if pitch is not None else radius * np.sqrt(np.pi / PATCH_POINTS)
+    depth = radius if depth is None else float(depth)
+    frame = model.site_frame(site)
+    turn = rng.uniform(0.0, 2 * np.pi)
+    e1 = np.cos(turn) * frame.d1 + np.sin(turn) * frame.d2
+    n = frame.normal
+    F = np.column_stack([e1, np.cross(n, e1), n])                   # map -> model
+    half = int(np.floor(radius / pitch))
+    axis = np.arange(-half, half + 1) * pitch
+    y, x = np.meshgrid(axis, axis, indexing="ij")
+    disc = (x * x + y * y <= radius * radius).ravel()
+    above = radius                                                  # rays start this far above the plane
+    origins = frame.point + np.column_stack([x.ravel(), y.ravel(), np.full(x.size, above)])[disc] @ F.T
+    t = _first_hits(model, origins, -n, above + depth, pitch / 2)
+    height = np.full(x.size, np.nan)
+    height[disc] = t - above
+    height[height > depth] = np.nan
+    height = height.reshape(x.shape)
+    seen = np.isfinite(height)
+    if not seen[half, half] or seen.mean() < 1.0 - MAX_HOLES:
+        raise ValueError(f"the patch sees too little surface ({100 * seen.mean():.0f}% of its pixels)")
+    if blur > 0:
+        sigma = blur / pitch
+        weight = gaussian_filter(seen.astype(np.float64), sigma, mode="constant")
+        smooth = gaussian_filter(np.where(seen, height, 0.0), sigma, mode="constant")
+        height = np.where(seen, smooth / np.maximum(weight, 1e-12), np.nan)
+    if noise > 0:
+        height = height + rng.normal(0.0, noise, size=height.shape)
+    R, t_ = (random_rigid_motion(rng, extent=model.size) if sensor_frame else (np.eye(3), np.zeros(3)))
+    sensor = {"rotation": (R @ F).tolist(), "translation": (rotate(R, frame.point) + t_).tolist()}
+    obj = {"height": [[None if not np.isfinite(d) else float(d) for d in row] for row in height], "pitch": pitch,
+           "sensor": sensor}
+    source = f"<simulated {model.name}>"
+    truth = {"model": model.name, "site": np.asarray(frame.site, dtype=float).tolist(),
+             "contact": frame.point.tolist(), "normal": n.tolist(),
+             "rotation": R.T.tolist(), "translation": (-rotate(R.T, t_)).tolist(),
+             "patch": {"radius": radius, "pitch": pitch, "noise": noise, "blur": blur, "depth": depth}}
+    return TactileData.from_patch(parse_patch(obj, source), units=units or model.units, meta={"truth": truth},
+                                  source=source)

@@ -53,6 +53,7 @@ BENCHMARKS: dict[str, Benchmark] = {
     "open-world": Benchmark("open_world", "run", "touches and sessions of scans left out of the database"),
     "serve": Benchmark("serve", "run", "what a request to tactrec serve costs beyond its recognition"),
     "sensor": Benchmark("sensor", "run", "touches as sensors record them: tip, outliers, miss, spacing, jitter"),
+    "patch": Benchmark("patch", "run", "touches as patches of 2-10 mm: accuracy beside the fit-limit ceiling, contact, time"),
     "viewer": Benchmark("viewer", "run", "tactrec show's page: its size, and the time a browser takes to draw it"),
     "answers": Benchmark("answers", "run", "the JSON of 50 seeded recognitions and 5 sessions, and their digests"),
 }

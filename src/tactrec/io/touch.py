@@ -1,7 +1,8 @@
-"""Tactile data: three or more planar curves meeting at one point (Section 3.1).
+"""Tactile data: three or more planar curves meeting at one point (Section 3.1), or a patch.
 
 Files (docs/formats.md): JSON with ``curves``, optional ``contact``, ``outward``,
-``units``; or CSV with the header ``curve,x,y,z``.  Everything is validated
+``units``; or CSV with the header ``curve,x,y,z``; or JSON with a ``patch``
+(:mod:`.patch`: the search reads it along curves through its middle, its spokes).  Everything is validated
 here, at the boundary, and a problem is reported as one
 :class:`~tactrec.errors.InputError` naming the file and what is wrong.
 """
@@ -24,6 +25,8 @@ from ..linalg import norm3, times
 from ..units import unit_scale
 from .atomic import write_text_atomic
 from .meeting import check_meeting
+from .patch import Patch, parse_patch, spokes
+from .values import FAR, MAX_COORDINATE, _check_reach, _points, _vector, number  # noqa: F401  (read here too)
 
 __all__ = ["TactileData", "load_touch", "save_touch", "parse_touch", "read_json", "MIN_CURVES", "MIN_POINTS"]
 
@@ -48,6 +51,9 @@ class TactileData:
     tip_radius : float
         The points are the centres of a spherical tip of this radius (data units; 0: points on
         the surface).
+    patch : Patch or None
+        Where the touch is a patch (:mod:`.patch`): its points; ``curves`` are then its spokes
+        and ``contact`` their common point.
     meta : dict
         Anything else the file carried (e.g. ``"truth"`` of a simulated touch).
     source : str
@@ -61,6 +67,24 @@ class TactileData:
     meta: dict = dataclasses.field(default_factory=dict)
     source: str = "<data>"
     tip_radius: float = 0.0
+    patch: Patch | None = None
+
+    @property
+    def kind(self) -> str:
+        """``"curves"`` or ``"patch"``."""
+        return "curves" if self.patch is None else "patch"
+
+    @classmethod
+    def from_patch(cls, patch: Patch, *, outward=None, units=None, meta=None, source: str = "<data>",
+                   tip_radius=0.0) -> "TactileData":
+        """A patch's touch: its spokes (:func:`.patch.spokes`) as the curves, their common point as the
+        contact, the outward direction given or the patch's own where it knows it."""
+        curves, contact = spokes(patch, source)
+        if outward is None and patch.oriented:
+            outward = patch.frame[2]
+        data = cls.from_arrays(curves, contact=contact, outward=outward, units=units, meta=meta, source=source,
+                               tip_radius=tip_radius)
+        return dataclasses.replace(data, patch=patch)
 
     @classmethod
     def from_arrays(cls, curves: Sequence, *, contact=None, outward=None, units=None,
@@ -117,90 +141,27 @@ class TactileData:
             contact=None if self.contact is None else move(self.contact),
             outward=None if self.outward is None else times(self.outward, R.T),
             tip_radius=scale * self.tip_radius,
+            patch=None if self.patch is None else self.patch.transformed(R, t, scale),
         )
 
     def to_json(self) -> dict[str, Any]:
         out: dict[str, Any] = {}
         if self.units is not None:
             out["units"] = self.units
-        out["curves"] = [c.tolist() for c in self.curves]
-        if self.contact is not None:
+        if self.patch is not None:
+            out["patch"] = self.patch.to_json()
+            if not self.patch.oriented and self.outward is not None:
+                out["outward"] = self.outward.tolist()
+        else:
+            out["curves"] = [c.tolist() for c in self.curves]
+        if self.contact is not None and self.patch is None:
             out["contact"] = self.contact.tolist()
-        if self.outward is not None:
+        if self.outward is not None and self.patch is None:
             out["outward"] = self.outward.tolist()
         if self.tip_radius > 0:
             out["tip_radius"] = self.tip_radius
         out.update(self.meta)
         return out
-
-
-#: no sensor records coordinates beyond this magnitude, nor a touch spanning less than its inverse, in any
-#: units (a thousand km in micrometres, a picometre in metres)
-MAX_COORDINATE = 1e12
-#: nor a touch farther from its frame's origin than this many times its own extent
-FAR = 1e6
-
-
-def _check_reach(arrays: list, source: str) -> None:
-    """Refuse, before any arithmetic on them, coordinates no sensor records: beyond
-    :data:`MAX_COORDINATE`, a touch spanning less than its inverse, or a touch more than :data:`FAR`
-    times its extent from its frame's origin (its shape would be lost in the coordinates' rounding)."""
-    reach = max(float(np.max(np.abs(a))) for a in arrays)
-    if reach > MAX_COORDINATE:
-        raise InputError(f"coordinates reach {reach:.3g}: no sensor records beyond {MAX_COORDINATE:.0e} in any "
-                         "units", source)
-    points = np.concatenate(arrays)
-    extent = float(np.max(points.max(axis=0) - points.min(axis=0)))
-    if 0 < extent < 1.0 / MAX_COORDINATE:
-        raise InputError(f"the touch spans {extent:.3g}: no sensor records under {1.0 / MAX_COORDINATE:.0e} in any "
-                         "units", source)
-    if extent > 0 and reach > FAR * extent:
-        raise InputError(f"the touch spans {extent:.3g} but lies {reach:.3g} from its frame's origin (more than "
-                         f"{FAR:.0e} times its extent): these are not a sensor's coordinates", source)
-
-
-def _points(obj, what: str, source: str) -> np.ndarray:
-    if not isinstance(obj, (list, tuple, np.ndarray)):
-        raise InputError(f"{what} must be a list of [x, y, z] points", source)
-    try:
-        arr = np.array(obj, dtype=np.float64)
-    except (TypeError, ValueError, OverflowError):
-        raise InputError(f"{what} must be a list of [x, y, z] numbers", source) from None
-    if arr.ndim != 2 or arr.shape[1] != 3:
-        raise InputError(f"{what} must be a list of [x, y, z] points (got shape {arr.shape})", source)
-    bad = ~np.isfinite(arr).all(axis=1)
-    if bad.any():
-        raise InputError(f"{what} point {int(np.argmax(bad)) + 1} is not finite ({arr[bad][0].tolist()})", source)
-    return arr
-
-
-def _vector(obj, what: str, source: str) -> np.ndarray:
-    """Three finite numbers, each within :data:`MAX_COORDINATE`."""
-    try:
-        arr = np.array(obj, dtype=np.float64)
-    except (TypeError, ValueError, OverflowError):
-        raise InputError(f"'{what}' must be [x, y, z] numbers", source) from None
-    if arr.shape != (3,):
-        raise InputError(f"'{what}' must be [x, y, z] (got {obj!r})", source)
-    if not np.isfinite(arr).all():
-        raise InputError(f"'{what}' is not finite ({arr.tolist()})", source)
-    if np.max(np.abs(arr)) > MAX_COORDINATE:
-        raise InputError(f"'{what}' reaches {np.max(np.abs(arr)):.3g}: no sensor records beyond "
-                         f"{MAX_COORDINATE:.0e} in any units", source)
-    return arr
-
-
-def number(obj, what: str, source: str) -> float:
-    """A finite number within :data:`MAX_COORDINATE` (not a bool), as a float."""
-    try:
-        if isinstance(obj, bool) or not isinstance(obj, (int, float, np.floating, np.integer)):
-            raise TypeError
-        value = float(obj)
-    except (TypeError, OverflowError):
-        raise InputError(f"'{what}' must be a number (got {str(obj)[:40]})", source) from None
-    if not math.isfinite(value) or abs(value) > MAX_COORDINATE:
-        raise InputError(f"'{what}' must be a finite number within {MAX_COORDINATE:.0e} (got {value:.3g})", source)
-    return value
 
 
 def _read_text(path: Path) -> str:
@@ -247,13 +208,27 @@ def parse_touch(obj, source: str) -> TactileData:
     (a service's request, :mod:`tactrec.service`); ``source`` names it in errors."""
     if not isinstance(obj, dict):
         raise InputError("expected a JSON object with 'curves'", source)
-    if "curves" not in obj:
-        raise InputError("missing 'curves'", source)
-    meta = {k: v for k, v in obj.items() if k not in {"curves", "contact", "outward", "units", "tip_radius"}}
+    kinds = [k for k in KINDS if k in obj]
+    if len(kinds) != 1:
+        raise InputError("missing 'curves'" if not kinds else
+                         f"a touch carries one of {', '.join(KINDS)} (got {' and '.join(kinds)})", source)
+    if kinds[0] == "contacts":
+        raise InputError("a touch of single contacts is not read by this version: give 'curves' or a 'patch'",
+                         source)
+    meta = {k: v for k, v in obj.items() if k not in {*KINDS, "contact", "outward", "units", "tip_radius"}}
+    if kinds[0] == "patch":
+        if "contact" in obj:
+            raise InputError("a patch takes no 'contact': its middle is where it is read", source)
+        return TactileData.from_patch(parse_patch(obj["patch"], source), outward=obj.get("outward"),
+                                      units=obj.get("units"), meta=meta, source=source,
+                                      tip_radius=obj.get("tip_radius", 0.0))
     return TactileData.from_arrays(obj["curves"], contact=obj.get("contact"), outward=obj.get("outward"),
                                    units=obj.get("units"), meta=meta, source=source,
                                    tip_radius=obj.get("tip_radius", 0.0))
 
+
+#: what a touch may carry: one of these
+KINDS = ("curves", "patch", "contacts")
 
 #: the columns a CSV touch may have: the coordinates, the curve's (or stroke's) label, the time
 _CSV_COLUMNS = ("curve", "stroke", "t", "x", "y", "z")
@@ -336,7 +311,8 @@ def load_touch(path: str | os.PathLike) -> TactileData:
         raise InputError(f"unsupported data format {suffix!r}; expected .json or .csv", path)
     text = _read_text(path)
     data = _parse_json(text, str(path)) if suffix == ".json" else _parse_csv(text, str(path))
-    check_meeting(data)
+    if data.patch is None:
+        check_meeting(data)
     return data
 
 
@@ -344,8 +320,8 @@ def save_touch(data: TactileData, path: str | os.PathLike) -> None:
     """Write a touch as JSON (or CSV, by suffix), atomically."""
     path = Path(path)
     if path.suffix.lower() == ".csv":
-        if data.tip_radius > 0:
-            raise InputError("a CSV touch file has no place for tip_radius: write it as .json", path)
+        if data.tip_radius > 0 or data.patch is not None:
+            raise InputError("a CSV touch file has no place for a patch or tip_radius: write it as .json", path)
         lines = ["curve,x,y,z"]
         for i, c in enumerate(data.curves, start=1):
             lines += [f"{i},{x!r},{y!r},{z!r}" for x, y, z in c.tolist()]

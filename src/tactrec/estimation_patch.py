@@ -1,0 +1,129 @@
+"""Local geometry of a patch: a weighted fit of its surface (the patch's Section 3.1).
+
+A patch samples the surface around the contact densely, so its normal and
+principal curvatures come from one fit of all its points rather than from
+curves: in the frame of the tangent plane at the contact, the height
+``h(u, v)`` is fitted by a cubic polynomial (the cubic terms free the slope and
+the curvature of the surface's own third-order bend, as ``degree=3`` does for
+a curve), each point weighted by a Gaussian of its distance from the contact
+(:data:`WIDTH` of the patch's reach), and refitted once in the frame of the
+fitted normal.  At the contact the gradient is then zero to first order and the
+principal curvatures are the eigenvalues of the Hessian (sign convention of
+:mod:`tactrec.surfaces.base`: negative on a convex surface).  The contact stays
+the patch's middle point, a point the sensor recorded.
+
+The patch's noise (:func:`patch_noise`) is measured on the data themselves:
+each point's residual from a quadric fitted to its nearest neighbours, the
+median absolute residual scaled to a Gaussian sigma.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .errors import InputError
+from .estimation import LocalGeometry
+from .linalg import dot3, norm3
+
+__all__ = ["estimate_patch", "patch_noise", "WIDTH"]
+
+#: the fit's Gaussian weights have this sigma, as a share of the patch's reach from the contact
+WIDTH = 0.6
+#: neighbours of each point in its local quadric (:func:`patch_noise`), and the most points measured
+NEIGHBOURS, NOISE_POINTS = 16, 4000
+
+
+def _terms(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """The cubic's design matrix: 1, u, v, u^2, u v, v^2, u^3, u^2 v, u v^2, v^3."""
+    return np.stack([np.ones_like(u), u, v, u * u, u * v, v * v, u ** 3, u * u * v, u * v * v, v ** 3], axis=1)
+
+
+def _fit(points: np.ndarray, contact: np.ndarray, normal: np.ndarray, first: np.ndarray, width: float):
+    """The weighted cubic of ``points`` over the plane through ``contact`` normal to ``normal``:
+    its frame ``(e1, e2, n)`` and coefficients."""
+    e1 = first - dot3(first, normal) * normal
+    e1 = e1 / norm3(e1)
+    e2 = np.cross(normal, e1)
+    rel = points - contact
+    u, v, h = rel @ e1, rel @ e2, rel @ normal
+    w = np.sqrt(np.exp(-0.5 * (u * u + v * v) / (width * width)))
+    scale = width
+    A = _terms(u / scale, v / scale) * w[:, None]
+    coef, *_ = np.linalg.lstsq(A, h * w, rcond=None)
+    coef = coef / np.array([1, scale, scale, scale ** 2, scale ** 2, scale ** 2] + [scale ** 3] * 4)
+    return (e1, e2, normal), coef
+
+
+def estimate_patch(data) -> LocalGeometry:
+    """Normal and principal curvatures at the contact of a patch touch ``data`` (its middle,
+    :func:`tactrec.io.patch.spokes`), by the module's fit of all its points.  ``N`` points along
+    ``data.outward`` where known, else so that the patch bends away from it (a convex guess; callers
+    try :meth:`~tactrec.estimation.LocalGeometry.flipped` too)."""
+    patch = data.patch
+    points = patch.points
+    contact = np.asarray(data.contact, dtype=np.float64)
+    reach = float(np.max(np.linalg.norm(points - contact, axis=1)))
+    width = WIDTH * reach
+    normal = patch.frame[2]
+    first = patch.frame[0]
+    for _ in range(3):                                         # refit in the fitted normal's frame
+        (e1, e2, n), c = _fit(points, contact, normal, first, width)
+        grad = np.array([c[1], c[2]])
+        tilted = n - grad[0] * e1 - grad[1] * e2
+        normal = tilted / norm3(tilted)
+        contact = contact + c[0] * n
+    (e1, e2, n), c = _fit(points, contact, normal, first, width)
+    if len(points) < 10 or not np.all(np.isfinite(c)):
+        raise InputError("the patch's points do not fix a surface (too few, or all on a line)", data.source)
+    hessian = np.array([[2 * c[3], c[4]], [c[4], 2 * c[5]]])
+    oriented = data.outward is not None
+    sign = 1.0
+    if oriented:
+        sign = 1.0 if dot3(n, data.outward) >= 0 else -1.0
+    elif np.trace(hessian) > 0:          # the patch bends towards n: the convex guess turns n over
+        sign = -1.0
+    n, hessian = sign * n, sign * hessian
+    e2 = np.cross(n, e1)
+    hessian = hessian if sign > 0 else hessian * np.array([[1.0, -1.0], [-1.0, 1.0]])   # v turned with e2
+    k, vec = np.linalg.eigh(hessian)                           # ascending: k2, k1
+    d1 = vec[0, 1] * e1 + vec[1, 1] * e2
+    d2 = np.cross(n, d1)
+    tangents = np.array([_tangent(curve, contact, n) for curve in data.curves])
+    kn = np.array([_normal_curvature(hessian, t, e1, e2) for t in tangents])
+    middle = np.asarray(data.contact, dtype=np.float64)      # a recorded point, as a curves' meeting point is
+    return LocalGeometry(middle, n, float(k[1]), float(k[0]), np.stack([d1, d2]), tangents, kn, oriented)
+
+
+def _tangent(curve: np.ndarray, contact: np.ndarray, normal: np.ndarray) -> np.ndarray:
+    """A spoke's direction in the tangent plane at the contact."""
+    d = np.asarray(curve[-1], dtype=np.float64) - np.asarray(curve[0], dtype=np.float64)
+    d = d - dot3(d, normal) * normal
+    return d / norm3(d)
+
+
+def _normal_curvature(hessian: np.ndarray, t: np.ndarray, e1: np.ndarray, e2: np.ndarray) -> float:
+    x = np.array([dot3(t, e1), dot3(t, e2)])
+    return float(x @ hessian @ x)
+
+
+def patch_noise(patch) -> float:
+    """The noise sigma of a patch's points along its normal: each point's residual from the quadric
+    of its :data:`NEIGHBOURS` nearest (itself among them), the median absolute residual scaled to
+    a Gaussian sigma and for the fit's degrees of freedom.  On at most :data:`NOISE_POINTS` points,
+    evenly taken."""
+    uvh = patch.plane_coordinates()
+    k = min(NEIGHBOURS, len(uvh))
+    chosen = np.arange(0, len(uvh), max(1, len(uvh) // NOISE_POINTS))
+    _, near = cKDTree(uvh[:, :2]).query(uvh[chosen, :2], k=k)
+    local = uvh[near]                                         # (m, k, 3)
+    rel = local - local[:, :1]
+    u, v, h = rel[..., 0], rel[..., 1], rel[..., 2]
+    span = np.maximum(np.max(np.hypot(u, v), axis=1), 1e-300)[:, None]
+    u, v = u / span, v / span
+    A = np.stack([np.ones_like(u), u, v, u * u, u * v, v * v], axis=-1)           # (m, k, 6)
+    pinv = np.linalg.pinv(A)                                                       # (m, 6, k)
+    fitted = np.einsum("mkj,mjl,ml->mk", A, pinv, h)
+    residual = (h - fitted)[:, 0]
+    dof = max(k - 6, 1) / k
+    return float(np.median(np.abs(residual)) / 0.6745 / np.sqrt(dof))
