@@ -261,7 +261,7 @@ def _default(obj):
 
 
 #: the sources every recognition depends on (files, or folders of ``.py`` files, relative to the package)
-CORE_SOURCES = ("io", "estimation.py", "features.py", "linalg.py", "simulation.py", "tables.py", "recognition",
+CORE_SOURCES = ("io", "estimation.py", "estimation_patch.py", "features.py", "linalg.py", "simulation.py", "tables.py", "recognition",
                 "runner.py", "tip.py", "outliers.py", "probability.py", "bootstrap.py", "chance", "surfaces", "registration",
                 "methods", "engine", "index", "compiled.py", "missed.py", "normal_scales.py", "units.py", "errors.py")
 

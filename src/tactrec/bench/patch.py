@@ -116,23 +116,24 @@ def _touch(task) -> dict:
     others = min((e for name, e in errors.items() if name != entry.name), default=np.inf)
     correct = known.best == entry.name
     contact = gap = None
-    if correct:
-        reg = known.registration
-        found = reg.scale * (reg.rotation @ touch.contact) + reg.translation
-        contact = float(np.linalg.norm(found - np.asarray(touch.meta["truth"]["contact"])) / reg.scale)
-    elif known.registration is not None:
-        win = known.registration
-        x = np.asarray(touch.points, dtype=np.float64)
+    x = np.asarray(touch.points, dtype=np.float64)
+    scale = conversion(touch.units, getattr(entry.model, "units", None))
+    on_truth = entry.model.distance(apply_poses(R, t, x * scale)[0]) / scale
+    win = known.registration
+    if win is not None:
         on_winner = db.get(win.model).model.distance(apply_poses(win.rotation[None] * win.scale,
                                                                  win.translation[None], x)[0]) / win.scale
-        scale = conversion(touch.units, getattr(entry.model, "units", None))
-        gap = paired_gap(on_winner, entry.model.distance(apply_poses(R, t, x * scale)[0]) / scale)
+        gap = paired_gap(on_winner, on_truth)          # right and far: whether the data tell the places apart
+    if correct:
+        found = win.scale * (win.rotation @ touch.contact) + win.translation
+        contact = float(np.linalg.norm(found - np.asarray(touch.meta["truth"]["contact"])) / win.scale)
     return {"scans": scans, "model": entry.name, "instance": instance, "radius": radius, "blur": blur,
             "vertex": vertex, "points": len(touch.patch.points), "noise_estimate": float(known.touch.noise),
             "recognized": known.best, "correct": correct, "ambiguous": known.ambiguous,
             "seconds": known.seconds, "contact_mm": contact, "truth_error": truth_error,
             "kind": "correct" if correct else ("outfitted" if others < own else "search miss"),
             "gap_se": gap, "within_noise": gap is not None and abs(gap) < 2.0,
+            "located": None if contact is None else bool(contact <= TARGETS["contact_mm"]),
             "known": _evidence(known), "unknown": _evidence(unknown), "unknown_seconds": unknown.seconds}
 
 
@@ -151,28 +152,42 @@ def _quantiles(values) -> list | None:
     return None if not len(v) else [float(np.median(v)), float(np.percentile(v, 95)), float(v.max())]
 
 
-def _summary(rows: list[dict], chance) -> dict:
+def _percent(values) -> float | None:
+    values = list(values)
+    return 100.0 * float(np.mean(values)) if values else None
+
+
+def _calibration(rows: list[dict], chance) -> dict:
+    """The known and unknown outcomes of ``rows`` mixed one to one, scored with ``chance`` (the set's
+    null model; None: the fit test alone): sure and wrong, unknown on top, the ECE and its floor."""
     from .open_world import outcome
 
-    n = max(len(rows), 1)
-    count = {k: sum(r["kind"] == k for r in rows) for k in ("correct", "outfitted", "search miss")}
-    clear = [r for r in rows if r["kind"] == "search miss" and not r["within_noise"]]
     known = [outcome(r["known"], chance=chance) + (r["model"],) for r in rows]
     unknown = [outcome(r["unknown"], chance=None if chance is None else chance.without([r["model"]]))
                for r in rows]
     conf = [k[1] for k in known] + [u[1] for u in unknown]
     right = [k[0] == k[3] for k in known] + [u[0] == "unknown" for u in unknown]
+    return {"sure_wrong": sum(c >= SURE and not ok for c, ok in zip(conf, right)),
+            "open_known_percent": _percent(k[0] == k[3] for k in known),
+            "unknown_top_percent": _percent(u[0] == "unknown" for u in unknown),
+            "ece": expected_calibration_error(conf, right), "ece_if_calibrated": ece_if_calibrated(conf)}
+
+
+def _summary(rows: list[dict], chance) -> dict:
+    n = max(len(rows), 1)
+    count = {k: sum(r["kind"] == k for r in rows) for k in ("correct", "outfitted", "search miss")}
+    clear = [r for r in rows if r["kind"] == "search miss" and not r["within_noise"]]
     return {"touches": len(rows), "accuracy_percent": 100.0 * count["correct"] / n,
             "ceiling_percent": 100.0 - 100.0 * count["outfitted"] / n,
             "clear_ceiling_percent": 100.0 - 100.0 * (count["outfitted"] + sum(
                 r["within_noise"] for r in rows if r["kind"] == "search miss")) / n,
             "clear_search_misses": len(clear),
             "contact_mm": _quantiles([r["contact_mm"] for r in rows]),
+            "located_percent": _percent([r["located"] for r in rows if r["correct"]]),
+            "far_within_noise": sum(r["correct"] and not r["located"] and r["within_noise"] for r in rows),
+            "far_clear": sum(r["correct"] and not r["located"] and not r["within_noise"] for r in rows),
             "seconds": _quantiles([r["seconds"] for r in rows]),
-            "sure_wrong": sum(c >= SURE and not ok for c, ok in zip(conf, right)),
-            "open_known_percent": 100.0 * float(np.mean([k[0] == k[3] for k in known])) if rows else None,
-            "unknown_top_percent": 100.0 * float(np.mean([u[0] == "unknown" for u in unknown])) if rows else None,
-            "ece": expected_calibration_error(conf, right), "ece_if_calibrated": ece_if_calibrated(conf)}
+            "calibration": _calibration(rows, chance), "fit_test": _calibration(rows, None)}
 
 
 def run(*, out, instances: int = 3, seed: int = 0, jobs: int | None = None, quiet: bool = False,
@@ -206,16 +221,26 @@ def _text(table: dict, sets, radii) -> str:
     s = table["summary"]
     lines = [f"fast, seed {table['seed']}, {table['instances']} patches per scan and radius, depth noise "
              f"{table['noise']} mm, blur {table['blur']} mm.", "",
-             "| set | radius mm | touches | right | clear ceiling | ceiling | clear search misses | contact mm "
-             "(median/p95/max) | s (median/p95/max) | sure and wrong | unknown on top | ECE (if calibrated) |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "| set | radius mm | touches | right | clear ceiling | ceiling | clear search misses | located (<= 1 mm) | "
+             "far: within the noise / clear | contact mm (median/p95/max) | s (median/p95/max) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     q = lambda v, f: "-" if v is None else "/".join(f"{x:{f}}" for x in v)   # noqa: E731
+    p = lambda v: "-" if v is None else f"{v:.0f}%"                          # noqa: E731
     for scans in sets:
         for r in radii:
             x = s[f"{scans}/{r:g}"]
             lines.append(f"| {scans} | {r:g} | {x['touches']} | {x['accuracy_percent']:.1f}% | "
                          f"{x['clear_ceiling_percent']:.1f}% | {x['ceiling_percent']:.1f}% | "
-                         f"{x['clear_search_misses']} | {q(x['contact_mm'], '.2f')} | {q(x['seconds'], '.2f')} | "
-                         f"{x['sure_wrong']} | {x['unknown_top_percent']:.0f}% | {x['ece']:.3f} "
-                         f"({x['ece_if_calibrated']:.3f}) |")
+                         f"{x['clear_search_misses']} | {p(x['located_percent'])} | {x['far_within_noise']} / "
+                         f"{x['far_clear']} | {q(x['contact_mm'], '.2f')} | {q(x['seconds'], '.2f')} |")
+    lines += ["", "Known and unknown (the scan left out) mixed one to one, with the set's null model of chance fits, "
+              "and by the fit test alone:", "",
+              "| set | radius mm | sure and wrong | right in the open world | unknown on top | ECE (if calibrated) | "
+              "fit test alone: sure and wrong | ECE |", "|---|---|---|---|---|---|---|---|"]
+    for scans in sets:
+        for r in radii:
+            c, f = s[f"{scans}/{r:g}"]["calibration"], s[f"{scans}/{r:g}"]["fit_test"]
+            lines.append(f"| {scans} | {r:g} | {c['sure_wrong']} | {p(c['open_known_percent'])} | "
+                         f"{p(c['unknown_top_percent'])} | {c['ece']:.3f} ({c['ece_if_calibrated']:.3f}) | "
+                         f"{f['sure_wrong']} | {f['ece']:.3f} |")
     return "\n".join(lines) + "\n"
