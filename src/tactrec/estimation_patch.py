@@ -5,9 +5,13 @@ principal curvatures come from one fit of all its points rather than from
 curves: in the frame of the tangent plane at the contact, the height
 ``h(u, v)`` is fitted by a cubic polynomial (the cubic terms free the slope and
 the curvature of the surface's own third-order bend, as ``degree=3`` does for
-a curve), each point weighted by a Gaussian of its distance from the contact
-(:data:`WIDTH` of the patch's reach), and refitted once in the frame of the
-fitted normal.  At the contact the gradient is then zero to first order and the
+a curve), each point weighted by a Gaussian of its distance from the contact,
+and refitted in the frame of the fitted normal.  The Gaussian's width is the
+widest of :data:`WIDTHS` of the patch's reach whose slope and curvature agree,
+within their standard errors under the patch's own noise, with every narrower
+width's (as a curve's window is chosen): wide where the surface is smooth
+enough to average the noise, narrow where its curvature changes across the
+patch.  At the contact the gradient is then zero to first order and the
 principal curvatures are the eigenvalues of the Hessian (sign convention of
 :mod:`tactrec.surfaces.base`: negative on a convex surface).  The contact stays
 the patch's middle point, a point the sensor recorded.
@@ -26,10 +30,14 @@ from .errors import InputError
 from .estimation import LocalGeometry
 from .linalg import dot3, norm3
 
-__all__ = ["estimate_patch", "patch_noise", "WIDTH"]
+__all__ = ["estimate_patch", "patch_noise", "WIDTHS"]
 
-#: the fit's Gaussian weights have this sigma, as a share of the patch's reach from the contact
-WIDTH = 0.6
+#: the fit's Gaussian weights' sigmas tried, as shares of the patch's reach from the contact
+WIDTHS = (0.2, 0.3, 0.45, 0.6)
+#: and at least this many of the patch's spacings
+NARROWEST = 3.0
+#: half-width of the intervals the widths' estimates must share, in standard errors (as a curve's)
+GAMMA = 3.5
 #: neighbours of each point in its local quadric (:func:`patch_noise`), and the most points measured
 NEIGHBOURS, NOISE_POINTS = 16, 4000
 
@@ -39,20 +47,48 @@ def _terms(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     return np.stack([np.ones_like(u), u, v, u * u, u * v, v * v, u ** 3, u * u * v, u * v * v, v ** 3], axis=1)
 
 
-def _fit(points: np.ndarray, contact: np.ndarray, normal: np.ndarray, first: np.ndarray, width: float):
-    """The weighted cubic of ``points`` over the plane through ``contact`` normal to ``normal``:
-    its frame ``(e1, e2, n)`` and coefficients."""
+def _fit(points: np.ndarray, contact: np.ndarray, normal: np.ndarray, first: np.ndarray, width: float,
+         sigma: float = 0.0):
+    """The weighted cubic of ``points`` over the plane through ``contact`` normal to ``normal``: its
+    frame ``(e1, e2, n)``, coefficients, and the standard errors of the slope and second derivatives
+    ``(c1, c2, 2 c3, c4, 2 c5)`` under noise ``sigma`` (the weighted fit's sandwich covariance)."""
     e1 = first - dot3(first, normal) * normal
     e1 = e1 / norm3(e1)
     e2 = np.cross(normal, e1)
     rel = points - contact
     u, v, h = rel @ e1, rel @ e2, rel @ normal
     w = np.sqrt(np.exp(-0.5 * (u * u + v * v) / (width * width)))
-    scale = width
-    A = _terms(u / scale, v / scale) * w[:, None]
+    A = _terms(u / width, v / width) * w[:, None]
     coef, *_ = np.linalg.lstsq(A, h * w, rcond=None)
-    coef = coef / np.array([1, scale, scale, scale ** 2, scale ** 2, scale ** 2] + [scale ** 3] * 4)
-    return (e1, e2, normal), coef
+    powers = np.array([0, 1, 1, 2, 2, 2, 3, 3, 3, 3])
+    coef = coef / width ** powers
+    bread = np.linalg.pinv(A.T @ A)
+    cov = sigma * sigma * bread @ (A.T @ (A * (w * w)[:, None])) @ bread / np.outer(width ** powers, width ** powers)
+    se = np.sqrt(np.maximum(np.diag(cov)[[1, 2, 3, 4, 5]], 0.0)) * np.array([1, 1, 2, 1, 2])
+    return (e1, e2, normal), coef, se
+
+
+def _derivatives(c: np.ndarray) -> np.ndarray:
+    """The slope and second derivatives ``(c1, c2, 2 c3, c4, 2 c5)`` of a fit's coefficients."""
+    return np.array([c[1], c[2], 2 * c[3], c[4], 2 * c[5]])
+
+
+def _width(points, contact, normal, first, reach: float, spacing: float, sigma: float) -> float:
+    """The widest of :data:`WIDTHS` (times ``reach``, at least :data:`NARROWEST` spacings) whose slope
+    and second derivatives agree with those of every narrower one: within the intersection of their
+    intervals of :data:`GAMMA` standard errors under the patch's noise (as a curve's window is
+    chosen, :func:`tactrec.estimation.fit_curve`)."""
+    widths = sorted({max(f * reach, NARROWEST * spacing) for f in WIDTHS})
+    lo, hi = np.full(5, -np.inf), np.full(5, np.inf)
+    best = widths[0]
+    for width in widths:
+        _, c, se = _fit(points, contact, normal, first, width, sigma)
+        value = _derivatives(c)
+        lo, hi = np.maximum(lo, value - GAMMA * se), np.minimum(hi, value + GAMMA * se)
+        if np.any(lo > hi):
+            break
+        best = width
+    return best
 
 
 def estimate_patch(data) -> LocalGeometry:
@@ -64,16 +100,18 @@ def estimate_patch(data) -> LocalGeometry:
     points = patch.points
     contact = np.asarray(data.contact, dtype=np.float64)
     reach = float(np.max(np.linalg.norm(points - contact, axis=1)))
-    width = WIDTH * reach
     normal = patch.frame[2]
     first = patch.frame[0]
-    for _ in range(3):                                         # refit in the fitted normal's frame
-        (e1, e2, n), c = _fit(points, contact, normal, first, width)
+    width = WIDTHS[-1] * reach
+    for step in range(4):                                      # refit in the fitted normal's frame
+        if step == 1:                                          # once the frame is near: the fit's width
+            width = _width(points, contact, normal, first, reach, patch.spacing, patch_noise(patch))
+        (e1, e2, n), c, _ = _fit(points, contact, normal, first, width)
         grad = np.array([c[1], c[2]])
         tilted = n - grad[0] * e1 - grad[1] * e2
         normal = tilted / norm3(tilted)
         contact = contact + c[0] * n
-    (e1, e2, n), c = _fit(points, contact, normal, first, width)
+    (e1, e2, n), c, _ = _fit(points, contact, normal, first, width)
     if len(points) < 10 or not np.all(np.isfinite(c)):
         raise InputError("the patch's points do not fix a surface (too few, or all on a line)", data.source)
     hessian = np.array([[2 * c[3], c[4]], [c[4], 2 * c[5]]])

@@ -75,11 +75,14 @@ def _db(scans: str):
 
 def patch_touch(entry, m_index: int, instance: int, seed: int, radius: float, blur: float = 0.0):
     """The bench's patch on ``entry``: at the instance's spread vertex, or the next one whose disc
-    sees enough surface: ``(vertex, data)``."""
+    sees enough surface (on a mesh too coarse for that many spread vertices, at seeded random ones):
+    ``(vertex, data)``."""
     from ..simulation import simulate_patch, spread_vertices
 
     vertices = spread_vertices(entry.model, instance + 8, rings=15, rng=instance_rng(seed, m_index))
     rng = instance_rng(seed, m_index, instance, int(radius * 10))
+    if len(vertices) <= instance:              # a coarse mesh runs out of spread vertices: any, seeded
+        vertices = rng.permutation(len(entry.model.vertices))[:instance + 8]
     for k in range(instance, len(vertices)):
         try:
             return int(vertices[k]), simulate_patch(entry.model, [int(vertices[k])], radius=radius, noise=NOISE,
