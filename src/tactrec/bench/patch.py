@@ -81,8 +81,8 @@ def patch_touch(entry, m_index: int, instance: int, seed: int, radius: float, bl
 
     vertices = spread_vertices(entry.model, instance + 8, rings=15, rng=instance_rng(seed, m_index))
     rng = instance_rng(seed, m_index, instance, int(radius * 10))
-    if len(vertices) <= instance:              # a coarse mesh runs out of spread vertices: any, seeded
-        vertices = rng.permutation(len(entry.model.vertices))[:instance + 8]
+    if len(vertices) < instance + 8:           # a coarse mesh runs out of spread vertices: then any, seeded
+        vertices = np.concatenate([vertices, rng.permutation(len(entry.model.vertices))[:instance + 8]])
     for k in range(instance, len(vertices)):
         try:
             return int(vertices[k]), simulate_patch(entry.model, [int(vertices[k])], radius=radius, noise=NOISE,
