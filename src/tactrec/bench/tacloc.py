@@ -70,6 +70,8 @@ def _touch(task) -> dict:
     db = _db(scans)
     entry = db.entries[m_index]
     _, touch = patch_touch(entry, m_index, instance, seed, radius)
+    if touch is None:
+        return {"scans": scans, "model": entry.name, "instance": instance, "radius": radius, "no_place": True}
     points = np.asarray(touch.patch.points, dtype=np.float64)
     errors, poses, failed = {}, {}, 0
     start = time.perf_counter()
@@ -118,7 +120,7 @@ def run(*, out, instances: int = 2, seed: int = 0, jobs: int | None = None, quie
     summary = {}
     for scans in sets:
         for r in radii:
-            rows = [x for x in records if x["scans"] == scans and x["radius"] == float(r)]
+            rows = [x for x in records if x["scans"] == scans and x["radius"] == float(r) and not x.get("no_place")]
             if not rows:
                 continue
             right = [x for x in rows if x["correct"]]
