@@ -127,6 +127,9 @@ class Touch:
         """The touch of ``data``: its points off their curves' traces set aside (:mod:`tactrec.outliers`;
         an :class:`InputError` where too few are left), then the estimate and the noise of those kept."""
         if data.patch is not None:                 # a patch: its own fit and noise (:mod:`.estimation_patch`)
+            from .surfaces.mesh_rings import even_arcs
+
+            data = dataclasses.replace(data, curves=even_arcs(data.curves, data.contact, data.units))
             geometry = estimate_patch(data)
             return cls(data, geometry, 1.0, patch_noise(data.patch)).with_estimate(geometry)
         data, count = kept(data)

@@ -207,8 +207,7 @@ def spokes(patch: Patch, source: str) -> tuple[list[np.ndarray], np.ndarray]:
     patch's spacing over the larger of the direction's two components, so that on a map's rows,
     columns and diagonals each step is one pixel, and coarser where that would give more than
     :data:`SPOKE_POINTS` a side) the patch's point nearest the diameter's sample, to where the patch
-    ends or a hole begins (no point within half a spacing), and no farther from the middle than the
-    shortest spoke reaches (a spoke that ends at the middle, one-sided, counts its other side).  An :class:`InputError` where a spoke
+    ends or a hole begins (no point within half a spacing).  An :class:`InputError` where a spoke
     has fewer than 5 points: the patch is too small, or too holed, to estimate its curvature."""
     uvh = patch.plane_coordinates()
     tree = cKDTree(uvh[:, :2])
@@ -236,17 +235,6 @@ def spokes(patch: Patch, source: str) -> tuple[list[np.ndarray], np.ndarray]:
         run = nearest[lo:hi + 1]
         if len(np.unique(run)) < len(run):
             raise InputError("the patch's points are too uneven to read along lines through its middle", source)
-        curves.append((run, np.arange(lo, hi + 1) - k, step))
+        curves.append(patch.points[run])
         contact = patch.points[nearest[k]] if contact is None else contact
-    # every spoke as far each way as the shortest reaches: each distance from the middle is then read
-    # in every direction or in none (a ring read in a few directions does not fix its harmonics)
-    sides = [(-ks[0] * step, ks[-1] * step) for _, ks, step in curves]
-    ends = min(min(a, b) if min(a, b) > 0 else max(a, b) for a, b in sides)
-    out = []
-    for run, ks, step in curves:
-        keep = np.abs(ks) * step <= ends * (1 + 1e-9)
-        if keep.sum() < 5:
-            raise InputError(f"the patch is too small, or too holed, to estimate curvature: {int(keep.sum())} "
-                             f"points along one line through its middle within {ends:.3g} of it", source)
-        out.append(patch.points[run[keep]])
-    return out, contact
+    return curves, contact

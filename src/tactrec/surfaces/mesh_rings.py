@@ -29,7 +29,7 @@ from ..linalg import dot3, lstsq, norm3
 from .mesh_grid import first_per_cell
 from ..units import conversion
 
-__all__ = ["PlaceRings", "model_rings", "touch_rings", "touch_ring_noise", "ARCS_MM", "ANGLES", "CELL_MM", "FEATURES", "ENDED"]
+__all__ = ["PlaceRings", "model_rings", "touch_rings", "touch_ring_noise", "even_arcs", "ARCS_MM", "ANGLES", "CELL_MM", "FEATURES", "ENDED"]
 
 #: arc lengths (mm) the rings are read at: a P3 touch's curves reach 12 mm each way
 ARCS_MM = (3.0, 6.0, 9.0, 11.0)
@@ -178,3 +178,25 @@ def _touch_samples(touch, sign: int) -> list[tuple[np.ndarray, np.ndarray]]:
             values.append(h / s_mm)
         out.append((np.array(theta), np.array(values)))
     return out
+
+
+def even_arcs(curves, contact: np.ndarray, units: str | None) -> tuple[np.ndarray, ...]:
+    """``curves`` through ``contact`` (data units ``units``) cut short of the first of :data:`ARCS_MM`
+    that not every half-curve reaches (by arc length from the contact): each ring is then read in
+    every direction or in none.  A ring read in only some directions does not fix its harmonic (a
+    patch's row and column reach farther than its diagonals).  A half that is empty (a one-sided
+    curve) does not count; ``curves`` as they are where every half reaches the same arcs."""
+    c = np.asarray(contact, dtype=np.float64)
+    arcs = np.asarray(ARCS_MM) * conversion("mm", units)
+    curves = [np.asarray(x, dtype=np.float64) for x in curves]
+    lengths, reaches = [], []
+    for curve in curves:
+        k0 = int(np.argmin(norm3(curve - c)))
+        steps = np.concatenate([[0.0], np.cumsum(norm3(np.diff(curve, axis=0)))])
+        arc = np.abs(steps - steps[k0]) + norm3(curve[k0] - c)       # along the curve from the contact
+        lengths.append(arc)
+        reaches += [float(arc[half].max()) for half in (slice(0, k0), slice(k0 + 1, None)) if len(arc[half])]
+    beyond = arcs[arcs > min(reaches)] if reaches else arcs[:0]
+    if not len(beyond) or max(reaches) < beyond[0]:
+        return tuple(curves)
+    return tuple(curve[arc < beyond[0]] for curve, arc in zip(curves, lengths))
