@@ -28,7 +28,7 @@ from scipy.spatial import cKDTree
 
 from .errors import InputError
 from .estimation import LocalGeometry
-from .linalg import dot3, norm3
+from .linalg import dot3, eigh, gram, inverse_spd, lstsq, norm3, solve_spd
 
 __all__ = ["estimate_patch", "patch_noise", "WIDTHS"]
 
@@ -51,20 +51,23 @@ def _fit(points: np.ndarray, contact: np.ndarray, normal: np.ndarray, first: np.
          sigma: float = 0.0):
     """The weighted cubic of ``points`` over the plane through ``contact`` normal to ``normal``: its
     frame ``(e1, e2, n)``, coefficients, and the standard errors of the slope and second derivatives
-    ``(c1, c2, 2 c3, c4, 2 c5)`` under noise ``sigma`` (the weighted fit's sandwich covariance)."""
+    ``(c1, c2, 2 c3, c4, 2 c5)`` under noise ``sigma`` (the weighted fit's sandwich covariance).  In
+    plain arithmetic (:mod:`tactrec.linalg`): the same digits under every BLAS kernel."""
     e1 = first - dot3(first, normal) * normal
     e1 = e1 / norm3(e1)
     e2 = np.cross(normal, e1)
     rel = points - contact
-    u, v, h = rel @ e1, rel @ e2, rel @ normal
+    u, v, h = dot3(rel, e1), dot3(rel, e2), dot3(rel, normal)
     w = np.sqrt(np.exp(-0.5 * (u * u + v * v) / (width * width)))
     A = _terms(u / width, v / width) * w[:, None]
-    coef, *_ = np.linalg.lstsq(A, h * w, rcond=None)
+    coef, _ = lstsq(A, h * w)
     powers = np.array([0, 1, 1, 2, 2, 2, 3, 3, 3, 3])
     coef = coef / width ** powers
-    bread = np.linalg.pinv(A.T @ A)
-    cov = sigma * sigma * bread @ (A.T @ (A * (w * w)[:, None])) @ bread / np.outer(width ** powers, width ** powers)
-    se = np.sqrt(np.maximum(np.diag(cov)[[1, 2, 3, 4, 5]], 0.0)) * np.array([1, 1, 2, 1, 2])
+    bread = inverse_spd(gram(A[None])[0])
+    meat = gram((A * w[:, None])[None])[0]
+    half = np.sum(bread[:, :, None] * meat[None, :, :], axis=1)              # bread @ meat, element-wise
+    variance = np.sum(half * bread.T, axis=1) * sigma * sigma / width ** (2 * powers)
+    se = np.sqrt(np.maximum(variance[[1, 2, 3, 4, 5]], 0.0)) * np.array([1, 1, 2, 1, 2])
     return (e1, e2, normal), coef, se
 
 
@@ -124,7 +127,7 @@ def estimate_patch(data) -> LocalGeometry:
     n, hessian = sign * n, sign * hessian
     e2 = np.cross(n, e1)
     hessian = hessian if sign > 0 else hessian * np.array([[1.0, -1.0], [-1.0, 1.0]])   # v turned with e2
-    k, vec = np.linalg.eigh(hessian)                           # ascending: k2, k1
+    k, vec = eigh(hessian)                                     # ascending: k2, k1
     d1 = vec[0, 1] * e1 + vec[1, 1] * e2
     d2 = np.cross(n, d1)
     tangents = np.array([_tangent(curve, contact, n) for curve in data.curves])
@@ -141,27 +144,30 @@ def _tangent(curve: np.ndarray, contact: np.ndarray, normal: np.ndarray) -> np.n
 
 
 def _normal_curvature(hessian: np.ndarray, t: np.ndarray, e1: np.ndarray, e2: np.ndarray) -> float:
-    x = np.array([dot3(t, e1), dot3(t, e2)])
-    return float(x @ hessian @ x)
+    x, y = float(dot3(t, e1)), float(dot3(t, e2))
+    return float(hessian[0, 0] * x * x + 2.0 * hessian[0, 1] * x * y + hessian[1, 1] * y * y)
 
 
 def patch_noise(patch) -> float:
     """The noise sigma of a patch's points along its normal: each point's residual from the quadric
-    of its :data:`NEIGHBOURS` nearest (itself among them), the median absolute residual scaled to
-    a Gaussian sigma and for the fit's degrees of freedom.  On at most :data:`NOISE_POINTS` points,
-    evenly taken."""
+    of its :data:`NEIGHBOURS` nearest (itself among them), over the root of one minus its leverage
+    (its own weight in that fit), the median absolute one scaled to a Gaussian sigma.  On at most
+    :data:`NOISE_POINTS` points, evenly taken; in plain arithmetic (:mod:`tactrec.linalg`)."""
     uvh = patch.plane_coordinates()
     k = min(NEIGHBOURS, len(uvh))
     chosen = np.arange(0, len(uvh), max(1, len(uvh) // NOISE_POINTS))
     _, near = cKDTree(uvh[:, :2]).query(uvh[chosen, :2], k=k)
-    local = uvh[near]                                         # (m, k, 3)
-    rel = local - local[:, :1]
+    rel = uvh[near] - uvh[near[:, :1]]                        # (m, k, 3): about each chosen point
     u, v, h = rel[..., 0], rel[..., 1], rel[..., 2]
     span = np.maximum(np.max(np.hypot(u, v), axis=1), 1e-300)[:, None]
     u, v = u / span, v / span
     A = np.stack([np.ones_like(u), u, v, u * u, u * v, v * v], axis=-1)           # (m, k, 6)
-    pinv = np.linalg.pinv(A)                                                       # (m, 6, k)
-    fitted = np.einsum("mkj,mjl,ml->mk", A, pinv, h)
-    residual = (h - fitted)[:, 0]
-    dof = max(k - 6, 1) / k
-    return float(np.median(np.abs(residual)) / 0.6745 / np.sqrt(dof))
+    G, b = gram(A, h)
+    coef = solve_spd(G, b)
+    own = A[:, 0]                                                                  # the point's row: (1, 0, ...)
+    leverage = np.sum(own * solve_spd(G, own), axis=1)
+    residual = h[:, 0] - np.sum(own * coef, axis=1)
+    fair = leverage < 0.9                                     # a point its fit all but passes through tells nothing
+    if not fair.any():
+        return 0.0
+    return float(np.median(np.abs(residual[fair]) / np.sqrt(1.0 - leverage[fair])) / 0.6745)

@@ -269,7 +269,7 @@ def simulate_patch(model: SurfaceModel, site, *, radius: float, pitch: float | N
     y, x = np.meshgrid(axis, axis, indexing="ij")
     disc = (x * x + y * y <= radius * radius).ravel()
     above = radius                                                  # rays start this far above the plane
-    origins = frame.point + np.column_stack([x.ravel(), y.ravel(), np.full(x.size, above)])[disc] @ F.T
+    origins = frame.point + times(np.column_stack([x.ravel(), y.ravel(), np.full(x.size, above)])[disc], F.T)
     t = _first_hits(model, origins, -n, above + depth, pitch / 2)
     height = np.full(x.size, np.nan)
     height[disc] = t - above
@@ -286,7 +286,7 @@ def simulate_patch(model: SurfaceModel, site, *, radius: float, pitch: float | N
     if noise > 0:
         height = height + rng.normal(0.0, noise, size=height.shape)
     R, t_ = (random_rigid_motion(rng, extent=model.size) if sensor_frame else (np.eye(3), np.zeros(3)))
-    sensor = {"rotation": (R @ F).tolist(), "translation": (rotate(R, frame.point) + t_).tolist()}
+    sensor = {"rotation": compose(R, F).tolist(), "translation": (rotate(R, frame.point) + t_).tolist()}
     obj = {"height": [[None if not np.isfinite(d) else float(d) for d in row] for row in height], "pitch": pitch,
            "sensor": sensor}
     source = f"<simulated {model.name}>"

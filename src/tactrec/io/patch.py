@@ -23,7 +23,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..errors import InputError
-from ..linalg import eigh, gram, times
+from ..linalg import dot3, eigh, gram, times
 from .values import _check_reach, _points, _vector, number
 
 __all__ = ["Patch", "parse_patch", "spokes", "SPOKES", "MAX_HOLES", "MIN_PATCH_POINTS", "SPOKE_POINTS"]
@@ -85,7 +85,7 @@ class Patch:
         return dataclasses.replace(
             self, points=scale * (times(self.points, R.T) + t),
             normals=None if self.normals is None else times(self.normals, R.T),
-            frame=times(self.frame, R.T), origin=scale * (R @ self.origin + t),
+            frame=times(self.frame, R.T), origin=scale * (times(self.origin, R.T) + t),
             height=None if self.height is None else scale * self.height,
             pitch=None if self.pitch is None else scale * self.pitch)
 
@@ -107,7 +107,7 @@ def _plane(points: np.ndarray, normals: np.ndarray | None) -> tuple[np.ndarray, 
     _, v = eigh(gram(centred[None])[0])
     e1, n = v[:, 2], v[:, 0]
     oriented = normals is not None
-    if oriented and float(np.sum(normals, axis=0) @ n) < 0:
+    if oriented and float(dot3(np.sum(normals, axis=0), n)) < 0:
         n = -n
     return np.stack([e1, np.cross(n, e1), n]), oriented
 
