@@ -24,7 +24,7 @@ from scipy.spatial import cKDTree
 
 from ..errors import InputError
 from ..linalg import dot3, eigh, gram, times
-from .values import _check_reach, _points, _vector, number
+from .values import _check_reach, _points, number, rigid_pose
 
 __all__ = ["Patch", "parse_patch", "spokes", "SPOKES", "MAX_HOLES", "MIN_PATCH_POINTS", "SPOKE_POINTS"]
 
@@ -151,7 +151,7 @@ def parse_patch(obj, source: str) -> Patch:
         pitch = number(obj.get("pitch"), "patch pitch", source)
         if pitch <= 0:
             raise InputError(f"'patch' pitch must be positive (got {pitch:g})", source)
-        R, t = _sensor(obj.get("sensor"), source, _vector)
+        R, t = _sensor(obj.get("sensor"), source)
         valid = np.isfinite(height).ravel()
         holes = 1.0 - valid.mean()
         if holes > MAX_HOLES:
@@ -182,20 +182,13 @@ def _height(obj, source: str) -> np.ndarray:
     return arr
 
 
-def _sensor(obj, source: str, vector) -> tuple[np.ndarray, np.ndarray]:
-    """The map-to-touch pose ``R, t`` (identity where not given)."""
+def _sensor(obj, source: str) -> tuple[np.ndarray, np.ndarray]:
+    """The map-to-touch pose ``R, t`` (identity where not given), a rigid motion (:func:`.values.rigid_pose`)."""
     if obj is None:
         return np.eye(3), np.zeros(3)
     if not isinstance(obj, dict) or set(obj) != {"rotation", "translation"}:
         raise InputError("'patch' sensor must be an object with 'rotation' and 'translation'", source)
-    try:
-        R = np.array(obj["rotation"], dtype=np.float64)
-    except (TypeError, ValueError, OverflowError):
-        raise InputError("'patch' sensor rotation must be a 3 x 3 matrix of numbers", source) from None
-    if R.shape != (3, 3) or not np.isfinite(R).all() or not np.allclose(R.T @ R, np.eye(3), atol=1e-6) \
-            or np.linalg.det(R) < 0:
-        raise InputError("'patch' sensor rotation must be a 3 x 3 rotation matrix", source)
-    return R, vector(obj["translation"], "patch sensor translation", source)
+    return rigid_pose(obj["rotation"], obj["translation"], source, "patch sensor")
 
 
 def spokes(patch: Patch, source: str) -> tuple[list[np.ndarray], np.ndarray]:

@@ -22,29 +22,14 @@ from typing import Sequence
 import numpy as np
 
 from ..errors import InputError
-from ..linalg import compose, det3, norm3, rotate, times
+from ..linalg import norm3, rotate, times
 from .atomic import write_text_atomic
 from .meeting import check_meeting
 from .touch import TactileData, _check_reach, _read_text, _vector, load_touch, number, parse_touch
+from .values import rigid_pose
 
 __all__ = ["SessionTouch", "SessionMiss", "MissedLine", "load_session", "parse_session_touch", "save_session",
            "is_session_file", "rigid_pose"]
-
-
-def rigid_pose(rotation, translation, source: str, what: str = "sensor2world") -> tuple[np.ndarray, np.ndarray]:
-    """Validate a rigid motion: ``rotation`` a proper rotation (orthonormal to 1e-6, determinant +1)
-    and ``translation`` three finite numbers.  Returns them as arrays."""
-    try:
-        R = np.array(rotation, dtype=np.float64)
-    except (TypeError, ValueError, OverflowError):
-        raise InputError(f"'{what}' rotation must be a 3 x 3 array of numbers", source) from None
-    if R.shape != (3, 3) or not np.isfinite(R).all():
-        raise InputError(f"'{what}' rotation must be a 3 x 3 array of finite numbers", source)
-    if np.max(np.abs(R)) > 2.0:
-        raise InputError(f"'{what}' rotation is not a rotation (an entry reaches {np.max(np.abs(R)):.3g})", source)
-    if np.max(np.abs(compose(R, R.T) - np.eye(3))) > 1e-6 or det3(R) < 0:
-        raise InputError(f"'{what}' rotation is not a rotation (orthonormal, determinant +1)", source)
-    return R, _vector(translation, f"{what} translation", source)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -8,8 +8,9 @@ import math
 import numpy as np
 
 from ..errors import InputError
+from ..linalg import compose, det3
 
-__all__ = ["MAX_COORDINATE", "FAR", "number"]
+__all__ = ["MAX_COORDINATE", "FAR", "number", "rigid_pose"]
 
 
 #: no sensor records coordinates beyond this magnitude, nor a touch spanning less than its inverse, in any
@@ -79,3 +80,19 @@ def number(obj, what: str, source: str) -> float:
     if not math.isfinite(value) or abs(value) > MAX_COORDINATE:
         raise InputError(f"'{what}' must be a finite number within {MAX_COORDINATE:.0e} (got {value:.3g})", source)
     return value
+
+
+def rigid_pose(rotation, translation, source: str, what: str = "sensor2world") -> tuple[np.ndarray, np.ndarray]:
+    """Validate a rigid motion: ``rotation`` a proper rotation (orthonormal to 1e-6, determinant +1)
+    and ``translation`` three finite numbers.  Returns them as arrays."""
+    try:
+        R = np.array(rotation, dtype=np.float64)
+    except (TypeError, ValueError, OverflowError):
+        raise InputError(f"'{what}' rotation must be a 3 x 3 array of numbers", source) from None
+    if R.shape != (3, 3) or not np.isfinite(R).all():
+        raise InputError(f"'{what}' rotation must be a 3 x 3 array of finite numbers", source)
+    if np.max(np.abs(R)) > 2.0:
+        raise InputError(f"'{what}' rotation is not a rotation (an entry reaches {np.max(np.abs(R)):.3g})", source)
+    if np.max(np.abs(compose(R, R.T) - np.eye(3))) > 1e-6 or det3(R) < 0:
+        raise InputError(f"'{what}' rotation is not a rotation (orthonormal, determinant +1)", source)
+    return R, _vector(translation, f"{what} translation", source)
