@@ -94,9 +94,10 @@ def _width(points, contact, normal, first, reach: float, spacing: float, sigma: 
     return best
 
 
-def estimate_patch(data) -> LocalGeometry:
+def estimate_patch(data, noise: float) -> LocalGeometry:
     """Normal and principal curvatures at the contact of a patch touch ``data`` (its middle,
-    :func:`tactrec.io.patch.spokes`), by the module's fit of all its points.  ``N`` points along
+    :func:`tactrec.io.patch.spokes`), by the module's fit of all its points, its width chosen under
+    the patch's ``noise`` (:func:`patch_noise`).  ``N`` points along
     ``data.outward`` where known, else so that the patch bends away from it (a convex guess; callers
     try :meth:`~tactrec.estimation.LocalGeometry.flipped` too)."""
     patch = data.patch
@@ -108,15 +109,15 @@ def estimate_patch(data) -> LocalGeometry:
     width = WIDTHS[-1] * reach
     for step in range(4):                                      # refit in the fitted normal's frame
         if step == 1:                                          # once the frame is near: the fit's width
-            width = _width(points, contact, normal, first, reach, patch.spacing, patch_noise(patch))
+            width = _width(points, contact, normal, first, reach, patch.spacing, noise)
         (e1, e2, n), c, _ = _fit(points, contact, normal, first, width)
         grad = np.array([c[1], c[2]])
         tilted = n - grad[0] * e1 - grad[1] * e2
         normal = tilted / norm3(tilted)
         contact = contact + c[0] * n
     (e1, e2, n), c, _ = _fit(points, contact, normal, first, width)
-    if len(points) < 10 or not np.all(np.isfinite(c)):
-        raise InputError("the patch's points do not fix a surface (too few, or all on a line)", data.source)
+    if not np.all(np.isfinite(c)):
+        raise InputError("the patch's points do not fix a surface (all on a line)", data.source)
     hessian = np.array([[2 * c[3], c[4]], [c[4], 2 * c[5]]])
     oriented = data.outward is not None
     sign = 1.0

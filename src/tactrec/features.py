@@ -34,6 +34,7 @@ from .estimation import LocalGeometry, estimate, noise_level
 from .estimation_patch import estimate_patch, patch_noise
 from .io.touch import TactileData
 from .outliers import kept
+from .surfaces.mesh_rings import even_arcs
 from .tip import EDGE, bends, corrected, offset, surface_curves, traceable
 
 __all__ = ["Touch", "Context", "subset"]
@@ -127,11 +128,10 @@ class Touch:
         """The touch of ``data``: its points off their curves' traces set aside (:mod:`tactrec.outliers`;
         an :class:`InputError` where too few are left), then the estimate and the noise of those kept."""
         if data.patch is not None:                 # a patch: its own fit and noise (:mod:`.estimation_patch`)
-            from .surfaces.mesh_rings import even_arcs
-
             data = dataclasses.replace(data, curves=even_arcs(data.curves, data.contact, data.units))
-            geometry = estimate_patch(data)
-            return cls(data, geometry, 1.0, patch_noise(data.patch)).with_estimate(geometry)
+            noise = patch_noise(data.patch)
+            geometry = estimate_patch(data, noise)
+            return cls(data, geometry, 1.0, noise).with_estimate(geometry)
         data, count = kept(data)
         geometry = estimate(data, window=window, degree=degree, method=curvature_method)
         noise = float(np.median([noise_level(np.asarray(c, dtype=np.float64)) for c in data.curves]))
