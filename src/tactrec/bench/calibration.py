@@ -36,11 +36,9 @@ import numpy as np
 
 from ..io.atomic import write_text_atomic
 from ..probability import Evidence, residuals
-from ..registration.solver import Criteria, solve
 from ..surfaces import BUILTIN_SETS
-from ..units import conversion
-from .common import (CORE_SOURCES, database, recognizer, run_parallel, saved_record, simulate, sources_hash,
-                     vertex_touch, write_json, ycb_database)
+from .common import (CORE_SOURCES, database, recognizer, refined_truth, run_parallel, saved_record, simulate,
+                     sources_hash, vertex_touch, write_json, ycb_database)
 
 __all__ = ["run", "SETS", "expected_calibration_error", "reliability"]
 
@@ -76,11 +74,7 @@ def reliability(confidence, correct, *, bins: int = 10) -> list[dict]:
 
 def _truth_fit(entry, touch) -> dict:
     """The true pose refined on the true scan: its evidence against the recognition's."""
-    scale = conversion(touch.units, getattr(entry.model, "units", None))
-    truth = touch.meta["truth"]
-    R = np.asarray(truth["rotation"], dtype=np.float64)[None]
-    t = np.asarray(truth["translation"], dtype=np.float64)[None] * scale
-    R, t, _, _ = solve(entry.model, R, t, touch.points * scale, Criteria(30))
+    R, t, _, scale = refined_truth(entry, touch)
     r = residuals(entry.model, R[0], t[0], touch.points, scale)
     return {"squares": float(np.sum(r * r))}
 

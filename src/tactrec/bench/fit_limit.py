@@ -37,11 +37,9 @@ from pathlib import Path
 import numpy as np
 
 from ..io.atomic import write_text_atomic
-from ..registration.solver import Criteria, solve
 from ..registration.result import apply_poses
-from ..units import conversion
 from .common import CORE_SOURCES, recognizer, run_parallel, saved_record, sources_hash, write_json
-from .common import PROTOCOLS, database, scan_set, simulate
+from .common import PROTOCOLS, database, refined_truth, scan_set, simulate
 
 __all__ = ["run"]
 
@@ -73,12 +71,7 @@ def _touch(task) -> dict:
     site, touch = simulate(entry, m_index, instance, seed, protocol)
     rec = recognizer(db.entries).recognize(touch)
     errors = {r.model: r.error / r.scale for r in rec.ranking if r.ok}
-    truth = touch.meta["truth"]
-    scale = conversion(touch.units, getattr(entry.model, "units", None))
-    R = np.asarray(truth["rotation"], dtype=np.float64)[None]
-    t = np.asarray(truth["translation"], dtype=np.float64)[None] * scale
-    R, t, refined, _ = solve(entry.model, R, t, touch.points * scale, Criteria(30))
-    truth_error = float(refined[0]) / scale
+    R, t, truth_error, scale = refined_truth(entry, touch)
     own = min(truth_error, errors.get(entry.name, np.inf))
     others = min((e for name, e in errors.items() if name != entry.name), default=np.inf)
     correct = rec.best == entry.name

@@ -36,11 +36,11 @@ import numpy as np
 
 from ..io.atomic import write_text_atomic
 from ..registration.result import apply_poses
-from ..registration.solver import Criteria, solve
-from ..units import conversion
 from .calibration import SURE, ece_if_calibrated, expected_calibration_error
-from .common import (CORE_SOURCES, instance_rng, null_model, recognizer, run_parallel, saved_record, sources_hash,
-                     write_json)
+from .common import (CORE_SOURCES, instance_rng, null_model, recognizer, refined_truth, run_parallel, saved_record,
+                     sources_hash, write_json)
+from .open_world import _percent
+from .sensor import _quantiles
 
 __all__ = ["run", "SETS", "RADII", "NOISE", "TARGETS"]
 
@@ -92,17 +92,6 @@ def patch_touch(entry, m_index: int, instance: int, seed: int, radius: float, bl
     return None, None                          # no place of this model takes a patch so large
 
 
-def _truth_fit(entry, touch) -> tuple[float, np.ndarray, np.ndarray]:
-    """The true pose refined on the true scan (point-to-plane on all the spokes' points): its error and
-    pose (model units)."""
-    truth = touch.meta["truth"]
-    scale = conversion(touch.units, getattr(entry.model, "units", None))
-    R = np.asarray(truth["rotation"], dtype=np.float64)[None]
-    t = np.asarray(truth["translation"], dtype=np.float64)[None] * scale
-    R, t, refined, _ = solve(entry.model, R, t, touch.points * scale, Criteria(30))
-    return float(refined[0]) / scale, R, t
-
-
 def _touch(task) -> dict:
     from .fit_limit import paired_gap
 
@@ -117,13 +106,12 @@ def _touch(task) -> dict:
     known = r.recognize(touch)
     unknown = r.recognize(touch, among=[e.name for e in db.entries if e is not entry])
     errors = {x.model: x.error / x.scale for x in known.ranking if x.ok}
-    truth_error, R, t = _truth_fit(entry, touch)
+    R, t, truth_error, scale = refined_truth(entry, touch)
     own = min(truth_error, errors.get(entry.name, np.inf))
     others = min((e for name, e in errors.items() if name != entry.name), default=np.inf)
     correct = known.best == entry.name
     contact = gap = None
     x = np.asarray(touch.points, dtype=np.float64)
-    scale = conversion(touch.units, getattr(entry.model, "units", None))
     on_truth = entry.model.distance(apply_poses(R, t, x * scale)[0]) / scale
     win = known.registration
     if win is not None:
@@ -151,16 +139,6 @@ def _saved(job):
     task, folder = job
     name = "-".join(str(x) for x in task)
     return saved_record(folder / f"{name}.json", lambda: _touch(task))
-
-
-def _quantiles(values) -> list | None:
-    v = np.asarray([x for x in values if x is not None], dtype=np.float64)
-    return None if not len(v) else [float(np.median(v)), float(np.percentile(v, 95)), float(v.max())]
-
-
-def _percent(values) -> float | None:
-    values = list(values)
-    return 100.0 * float(np.mean(values)) if values else None
 
 
 def _calibration(rows: list[dict], chance) -> dict:
