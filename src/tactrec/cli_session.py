@@ -34,8 +34,9 @@ def format_result(name: str, result) -> str:
     flag += ", ambiguous" if result.ambiguous else ""
     if not result.settled:
         flag += ", unsettled: the search's budget ran out before a fit within the noise"
+    shape = f"k1 {est.k1:.4g}, k2 {est.k2:.4g}; " if est.reported is not None else ""
     lines = [f"{name}: {'best ' + result.best if result.best else 'no model matches'}"
-             f"   (k1 {est.k1:.4g}, k2 {est.k2:.4g}; {result.seconds:.2f} s, method {result.method}{flag})"]
+             f"   ({shape}{result.seconds:.2f} s, method {result.method}{flag})"]
     for rank, r in enumerate(result.ranking, start=1):
         if r.ok:
             loc = ", ".join(f"{x:.4g}" for x in r.location)

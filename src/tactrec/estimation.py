@@ -81,6 +81,11 @@ class LocalGeometry:
     def curvatures(self) -> tuple[float, float]:
         return (self.k1, self.k2)
 
+    @property
+    def reported(self) -> list | None:
+        """``[k1, k2]`` as a result gives them; None where the touch gives no curvature (contacts)."""
+        return [self.k1, self.k2] if np.isfinite(self.k1) else None
+
     def flipped(self) -> "LocalGeometry":
         """The same estimate with the normal reversed: ``(k1, k2) -> (-k2, -k1)``."""
         return dataclasses.replace(

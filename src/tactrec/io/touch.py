@@ -1,8 +1,9 @@
-"""Tactile data: three or more planar curves meeting at one point (Section 3.1), or a patch.
+"""Tactile data: three or more planar curves meeting at one point (Section 3.1), a patch, or contacts.
 
 Files (docs/formats.md): JSON with ``curves``, optional ``contact``, ``outward``,
 ``units``; or CSV with the header ``curve,x,y,z``; or JSON with a ``patch``
-(:mod:`.patch`: the search reads it along curves through its middle, its spokes).  Everything is validated
+(:mod:`.patch`: the search reads it along curves through its middle, its spokes); or JSON with
+``contacts`` (:mod:`.contacts`: each a curve of one point to every stage that scores a pose).  Everything is validated
 here, at the boundary, and a problem is reported as one
 :class:`~tactrec.errors.InputError` naming the file and what is wrong.
 """
@@ -25,6 +26,7 @@ from ..linalg import norm3, times
 from ..units import unit_scale
 from .atomic import write_text_atomic
 from .meeting import check_meeting
+from .contacts import Contacts, parse_contacts
 from .patch import Patch, parse_patch, spokes
 from .values import FAR, MAX_COORDINATE, _check_reach, _points, _vector, number  # noqa: F401  (read here too)
 
@@ -54,6 +56,9 @@ class TactileData:
     patch : Patch or None
         Where the touch is a patch (:mod:`.patch`): its points; ``curves`` are then its spokes
         and ``contact`` their common point.
+    contacts : Contacts or None
+        Where the touch is single contacts (:mod:`.contacts`): ``curves`` are then its points, one
+        a curve, and ``contact`` is None.
     meta : dict
         Anything else the file carried (e.g. ``"truth"`` of a simulated touch).
     source : str
@@ -68,11 +73,24 @@ class TactileData:
     source: str = "<data>"
     tip_radius: float = 0.0
     patch: Patch | None = None
+    contacts: Contacts | None = None
 
     @property
     def kind(self) -> str:
-        """``"curves"`` or ``"patch"``."""
-        return "curves" if self.patch is None else "patch"
+        """``"curves"``, ``"patch"`` or ``"contacts"``."""
+        return "patch" if self.patch is not None else "contacts" if self.contacts is not None else "curves"
+
+    @classmethod
+    def from_contacts(cls, contacts: Contacts, *, units=None, meta=None, source: str = "<data>") -> "TactileData":
+        """A touch of single contacts: each point a curve of one point (what every stage that scores a
+        pose reads); no contact point, no outward hint (each contact gives its own normal)."""
+        if units is not None:
+            try:
+                unit_scale(units)
+            except ValueError as exc:
+                raise InputError(str(exc), source) from None
+        return cls(tuple(p[None].copy() for p in contacts.points), None, None, units, dict(meta or {}), source,
+                   contacts=contacts)
 
     @classmethod
     def from_patch(cls, patch: Patch, *, outward=None, units=None, meta=None, source: str = "<data>",
@@ -127,7 +145,11 @@ class TactileData:
 
     @property
     def spacing(self) -> float:
-        """Median distance between neighbouring points of a curve."""
+        """Median distance between neighbouring points of a curve (of contacts: from each to its nearest)."""
+        if self.contacts is not None:
+            x = self.contacts.points
+            d = np.linalg.norm(x[:, None] - x[None], axis=2) + np.diag(np.full(len(x), np.inf))
+            return float(np.median(d.min(axis=1))) if len(x) > 1 else 0.0
         return float(np.median(np.concatenate([np.linalg.norm(np.diff(c, axis=0), axis=1) for c in self.curves])))
 
     def transformed(self, rotation: np.ndarray, translation: np.ndarray, *, scale: float = 1.0) -> "TactileData":
@@ -142,13 +164,16 @@ class TactileData:
             outward=None if self.outward is None else times(self.outward, R.T),
             tip_radius=scale * self.tip_radius,
             patch=None if self.patch is None else self.patch.transformed(R, t, scale),
+            contacts=None if self.contacts is None else self.contacts.transformed(R, t, scale),
         )
 
     def to_json(self) -> dict[str, Any]:
         out: dict[str, Any] = {}
         if self.units is not None:
             out["units"] = self.units
-        if self.patch is not None:
+        if self.contacts is not None:
+            out["contacts"] = self.contacts.to_json()
+        elif self.patch is not None:
             out["patch"] = self.patch.to_json()
             if not self.patch.oriented and self.outward is not None:
                 out["outward"] = self.outward.tolist()
@@ -156,7 +181,7 @@ class TactileData:
             out["curves"] = [c.tolist() for c in self.curves]
         if self.contact is not None and self.patch is None:
             out["contact"] = self.contact.tolist()
-        if self.outward is not None and self.patch is None:
+        if self.outward is not None and self.patch is None and self.contacts is None:
             out["outward"] = self.outward.tolist()
         if self.tip_radius > 0:
             out["tip_radius"] = self.tip_radius
@@ -212,10 +237,14 @@ def parse_touch(obj, source: str) -> TactileData:
     if len(kinds) != 1:
         raise InputError("missing 'curves'" if not kinds else
                          f"a touch carries one of {', '.join(KINDS)} (got {' and '.join(kinds)})", source)
-    if kinds[0] == "contacts":
-        raise InputError("a touch of single contacts is not read by this version: give 'curves' or a 'patch'",
-                         source)
     meta = {k: v for k, v in obj.items() if k not in {*KINDS, "contact", "outward", "units", "tip_radius"}}
+    if kinds[0] == "contacts":
+        for key in ("contact", "outward", "tip_radius"):
+            if key in obj:
+                raise InputError(f"a touch of contacts takes no {key!r}: each contact gives its own point and "
+                                 "normal", source)
+        return TactileData.from_contacts(parse_contacts(obj["contacts"], source), units=obj.get("units"),
+                                         meta=meta, source=source)
     if kinds[0] == "patch":
         if "contact" in obj:
             raise InputError("a patch takes no 'contact': its middle is where it is read", source)
@@ -311,7 +340,7 @@ def load_touch(path: str | os.PathLike) -> TactileData:
         raise InputError(f"unsupported data format {suffix!r}; expected .json or .csv", path)
     text = _read_text(path)
     data = _parse_json(text, str(path)) if suffix == ".json" else _parse_csv(text, str(path))
-    if data.patch is None:
+    if data.kind == "curves":
         check_meeting(data)
     return data
 
@@ -320,8 +349,9 @@ def save_touch(data: TactileData, path: str | os.PathLike) -> None:
     """Write a touch as JSON (or CSV, by suffix), atomically."""
     path = Path(path)
     if path.suffix.lower() == ".csv":
-        if data.tip_radius > 0 or data.patch is not None:
-            raise InputError("a CSV touch file has no place for a patch or tip_radius: write it as .json", path)
+        if data.tip_radius > 0 or data.kind != "curves":
+            raise InputError(f"a CSV touch file has no place for {'tip_radius' if data.kind == 'curves' else data.kind}:"
+                             " write it as .json", path)
         lines = ["curve,x,y,z"]
         for i, c in enumerate(data.curves, start=1):
             lines += [f"{i},{x!r},{y!r},{z!r}" for x, y, z in c.tolist()]

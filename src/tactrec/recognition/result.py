@@ -89,7 +89,9 @@ class Recognition(Answer):
     def meeting(self) -> float:
         """How far the curves pass from their meeting point: the largest distance of a curve (of the
         points kept) from it, data units (0 without a touch; :func:`tactrec.io.meeting.meeting`)."""
-        return float(meeting(self.touch.data)[1].max()) if self.touch is not None else 0.0
+        if self.touch is None or self.touch.data.contacts is not None:
+            return 0.0
+        return float(meeting(self.touch.data)[1].max())
 
     @property
     def registration(self) -> Registration | None:
@@ -104,7 +106,7 @@ class Recognition(Answer):
                         for r in self.ranking],
             "contact": self.estimate.contact.tolist(),
             "normal": (self.estimate.normal * (self.registration.normal_sign if self.registration else 1)).tolist(),
-            "curvatures": [self.estimate.k1, self.estimate.k2],
+            "curvatures": self.estimate.reported,
             "method": self.method,
             "confidence": self.confidence,
             "unknown": self.unknown,

@@ -108,7 +108,7 @@ class SessionResult(Answer):
         ranking += [{"model": name, "error": None, "rejected": why} for name, why in self.rejected.items()]
         out = {"best": self.best, "ranking": ranking}
         if g is not None:                                            # the latest touch, world frame
-            out.update(contact=g.contact.tolist(), normal=g.normal.tolist(), curvatures=[g.k1, g.k2])
+            out.update(contact=g.contact.tolist(), normal=g.normal.tolist(), curvatures=g.reported)
         out.update(confidence=self.confidence, unknown=self.unknown, calibrated=self.chance is not None,
                    ambiguous=self.ambiguous, touches=self.touches,
                    slipped=list(self.slipped), missed=self.missed,
