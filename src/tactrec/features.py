@@ -127,6 +127,8 @@ class Touch:
                   curvature_method: str = "auto") -> "Touch":
         """The touch of ``data``: its points off their curves' traces set aside (:mod:`tactrec.outliers`;
         an :class:`InputError` where too few are left), then the estimate and the noise of those kept."""
+        if data.contacts is not None:              # contacts: no curvature, their stated noise
+            return cls(data, contact_geometry(data.contacts), 1.0, data.contacts.noise)
         if data.patch is not None:                 # a patch: its own fit and noise (:mod:`.estimation_patch`)
             data = dataclasses.replace(data, curves=even_arcs(data.curves, data.contact, data.units))
             noise = patch_noise(data.patch)
@@ -354,6 +356,22 @@ class Touch:
         if scale == self.scale:
             return self
         return dataclasses.replace(self, scale=float(scale))          # every other field kept, nothing cached
+
+
+def contact_geometry(contacts) -> LocalGeometry:
+    """What a touch of contacts gives of the local geometry: the contact nearest the contacts' centroid
+    of those with a normal (the first of equals), its normal, and no curvature (NaN)."""
+    x = contacts.points
+    given = np.flatnonzero(contacts.has_normal)
+    if not len(given):
+        given = np.arange(len(x))
+    i = int(given[np.argmin(np.linalg.norm(x[given] - x.mean(axis=0), axis=1))])
+    n = contacts.normals[i] if contacts.has_normal[i] else np.array([0.0, 0.0, 1.0])
+    from .registration.result import local_frame
+
+    frame = local_frame(n)
+    return LocalGeometry(x[i].copy(), frame[2], np.nan, np.nan, frame[:2], np.zeros((0, 3)), np.zeros(0),
+                         bool(contacts.has_normal[i]))
 
 
 def _scaled(g: LocalGeometry, s: float) -> LocalGeometry:

@@ -30,7 +30,8 @@ from ..features import Context, Touch
 from ..io.touch import TactileData
 from ..methods import DEFAULT_METHOD, get_method
 from ..probability import FLOOR, UNKNOWN_PRIOR, evidence, fit_limit, plausible_fit, residuals, resolution
-from ..registration.result import Registration
+from ..methods.base import NOT_SEARCHED, SearchOutcome
+from ..registration.result import Outcome, Registration
 from ..runner import Held, Pool, Serial, can_fork
 from ..tables import CurvatureTable
 from ..units import conversion
@@ -216,6 +217,9 @@ class Recognizer:
         def refit(outcome, t):
             return self.method.refit(t, self.models, self.config, self.runner, outcome)
 
+        if data.contacts is not None:                  # single contacts: posed from their triangles
+            return self._recognition(*self._contacts(data, chosen), start)
+
         def searched(d, left):
             def search(t):
                 return self.method.search(t, self.models, self.config, self.runner, among=chosen, budget=left,
@@ -231,6 +235,32 @@ class Recognizer:
         if data.contact is None and not self._fits(touch, outcome) and missing(touch):
             touch, outcome = other_meetings(data, touch, outcome, searched, self._fits, budget)
         return self._recognition(touch, outcome, start)
+
+    def _contacts(self, data: TactileData, chosen) -> tuple[Touch, SearchOutcome]:
+        """A touch of contacts searched over the models ``chosen`` (None: all) by
+        :func:`tactrec.engine.contacts.contact_stage`; an :class:`InputError` where they cannot be posed
+        (:func:`tactrec.io.contacts.spread_problem`)."""
+        from ..engine.contacts import contact_stage
+        from ..io.contacts import spread_problem
+
+        problem = spread_problem(data.contacts)
+        if problem is not None:
+            raise InputError(problem, data.source)
+        touch = Touch.from_data(data)
+        indices = range(len(self.models)) if chosen is None else chosen
+        within = float(getattr(self.config, "within", 3.0))
+        limit = plausible_fit(fit_limit(touch, self.floor), touch.noise, len(touch.points), within)
+        found = dict(zip(indices, self.runner.map(contact_stage, list(indices), touch, limit)))
+        ranking = [found.get(i) or Registration(e.name, np.inf, outcome=Outcome.NOT_SEARCHED,
+                                                reason=NOT_SEARCHED)
+                   for i, e in enumerate(self.models)]
+        return touch, SearchOutcome(ranking, True, 0, 1, None)
+
+    def unposed(self, touch: Touch, reason: str) -> Recognition:
+        """The recognition of a touch no model was searched for, every model not searched for ``reason``
+        (a session's contacts before they can be posed)."""
+        ranking = [Registration(e.name, np.inf, outcome=Outcome.NOT_SEARCHED, reason=reason) for e in self.models]
+        return self._recognition(touch, SearchOutcome(ranking, True, 0, 0, None), time.perf_counter())
 
     def _recognition(self, touch: Touch, outcome, start: float) -> Recognition:
         """The :class:`~.result.Recognition` of ``outcome``, the search of ``touch``: the ranking by error,

@@ -1,0 +1,286 @@
+"""Hypotheses from single contacts: poses from triangles of contacts, screened on a mesh's vertices.
+
+A touch of contacts (:mod:`tactrec.io.contacts`) has no curvature to look
+up; what it has is distances.  Three contacts ``a, b, c`` span a triangle
+whose sides no pose changes, so each of the model's triangles of places
+with the same sides (within the places' spacing) poses the data: ``a, b, c``
+onto the three places, by the frames the triangles span (no fit, no BLAS).
+A contact's normal is a rotation-free test too: the angle between two
+contacts' normals, and each normal's angle to the chord between them, are
+the same on the model, within three of their standard deviations (a normal
+given without one tests nothing).
+
+Per model the search (:func:`contact_stage`):
+
+1. thins the mesh's vertices to about :data:`PLACES` places (one per grid
+   cell, :func:`tactrec.registration.mesh_fast.first_per_place`), each with
+   its fitted normal;
+2. for each of up to :data:`TRIANGLES` triangles of contacts (the largest
+   first, then the largest with a new corner), takes every pair of places as
+   far apart as ``a`` and ``b`` (and alike in normals), joins the pairs that
+   share ``a``'s place with those as far apart as ``a`` and ``c``, keeps the
+   joins whose third side matches, and poses each;
+3. (per triangle, until one's best pose is a fit) screens every pose by all contacts (their distances to the nearest
+   vertices and their normals' angles to those vertices', :func:`_screen`), keeps the best :data:`KEEP`
+   and refines them on exact distances (:func:`tactrec.registration.solver.solve`,
+   every contact);
+4. keeps the pose of least mean distance among those whose normals agree
+   with the model's (:func:`_agree`: a chi-square test of their angles
+   under their stated uncertainties); the others that agree are its
+   alternatives.
+
+A model whose places hold no such triangle, or none of whose refined poses
+agrees with the contacts' normals, is rejected: six or fewer contacts fit
+almost any smooth surface by their distances alone (a pose has six degrees of
+freedom), and it is their normals that rule a model out.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..linalg import rotate, stable_order, transform
+from ..registration.result import Outcome, Registration
+
+__all__ = ["contact_stage", "triangles", "PLACES", "KEEP", "TRIANGLES", "SIGMAS"]
+
+#: about this many places per model (one per grid cell): the pairs of places number its square
+PLACES = 800
+#: points sampled per place, uniform over the area: what the places are chosen from and posed contacts tested on
+DENSE = 20
+#: poses per model that take steps on the distance field (the best by the field's screen)
+FIELD_KEEP = 1000
+#: their steps
+FIELD_STEPS = 10
+#: poses per model refined on exact distances
+KEEP = 24
+#: triangles of contacts posed per model (each a different third corner)
+TRIANGLES = 3
+#: a normal agrees within this many of its standard deviations (the fit test's allowance)
+SIGMAS = 3.0
+#: a normal's angle to the truth is within this many of its standard deviations but for the fit test's
+#: tail: the root of the chi-square quantile of two degrees of freedom at SIGMAS normal deviations out
+ANGLE = float(np.sqrt(-2.0 * np.log(0.5 * math.erfc(SIGMAS / math.sqrt(2.0)))))
+#: triangles of places posed and screened at a time
+CHUNK = 200_000
+#: exact refinement steps
+STEPS = 30
+
+
+def triangles(points: np.ndarray, count: int) -> list[tuple[int, int, int]]:
+    """Up to ``count`` triangles of the contacts ``points (n, 3)``: the largest, then each the largest
+    with a corner none before had (ties by index).  A triangle of zero area is never one."""
+    n = len(points)
+    i, j, k = np.array([(i, j, k) for i in range(n) for j in range(i + 1, n) for k in range(j + 1, n)]).T
+    area = 0.5 * np.linalg.norm(np.cross(points[j] - points[i], points[k] - points[i]), axis=1)
+    order = stable_order(-area)
+    out, used = [], set()
+    for q in order:
+        tri = (int(i[q]), int(j[q]), int(k[q]))
+        if area[q] <= 0 or (out and set(tri) <= used):
+            continue
+        out.append(tri)
+        used |= set(tri)
+        if len(out) == count:
+            break
+    return out
+
+
+def _surface(model, count: int, rng) -> tuple[np.ndarray, np.ndarray]:
+    """``count`` points uniform over the mesh's area (faces chosen by area, seeded ``rng``) and their
+    faces' normals: a mesh's vertices need not cover its surface (a cylinder's long facets)."""
+    area = model.face_areas
+    face = rng.choice(len(area), size=count, p=area / area.sum())
+    u, v = rng.random(count), rng.random(count)
+    flip = u + v > 1
+    u[flip], v[flip] = 1 - u[flip], 1 - v[flip]
+    corner = model.vertices[model.faces[face]]
+    return corner[:, 0] + u[:, None] * (corner[:, 1] - corner[:, 0]) + v[:, None] * (corner[:, 2] - corner[:, 0]), \
+        model.face_normals[face]
+
+
+def _places(model):
+    """The mesh ``model``'s places for contacts, built once: of :data:`DENSE` x :data:`PLACES` points
+    uniform over its area (seeded), the first of each grid cell about :data:`PLACES` cover (positions
+    ``(p, 3)``, their faces' normals ``(p, 3)``), and ``reach``, the farthest any of the points lies
+    from its nearest place."""
+    from scipy.spatial import cKDTree
+
+    memo = model.search_memo
+    if "contact_places" not in memo:
+        dense, normals = _surface(model, DENSE * PLACES, np.random.default_rng(0))
+        size = float(np.sqrt(model.area / PLACES))
+        cells = np.floor((dense - dense.min(axis=0)) / size).astype(np.int64)
+        _, first = np.unique(cells, axis=0, return_index=True)
+        first = np.sort(first)
+        P, N = dense[first], normals[first]
+        memo["contact_places"] = (P, N, float(cKDTree(P).query(dense)[0].max()))
+    return memo["contact_places"]
+
+
+def _angle(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """The angle between unit rows ``u`` and ``v``, degrees (element-wise: no BLAS)."""
+    return np.degrees(np.arccos(np.clip(np.sum(u * v, axis=-1), -1.0, 1.0)))
+
+
+def _pairs(P, N, length: float, tol: float, na, nb):
+    """The ordered pairs of distinct places ``(v, w)`` as far apart as ``length`` (within ``tol``) whose
+    normals make the angles the contacts' normals make with the chord between them and with each
+    other: ``na``, ``nb`` (each None or ``(normal, angle to the chord, allowance in degrees)``).
+    Returns ``v (q,), w (q,)``."""
+    vs, ws = [], []
+    for start in range(0, len(P), 256):
+        d = np.linalg.norm(P[start:start + 256, None] - P[None], axis=2)
+        v, w = np.nonzero((np.abs(d - length) <= tol) & (d > 0))
+        v = v + start
+        if len(v) and (na is not None or nb is not None):
+            u = (P[w] - P[v]) / d[v - start, w][:, None]
+            ok = np.ones(len(v), dtype=bool)
+            if na is not None:
+                ok &= np.abs(_angle(N[v], u) - na[1]) <= na[2]
+            if nb is not None:
+                ok &= np.abs(_angle(N[w], u) - nb[1]) <= nb[2]
+            if na is not None and nb is not None:
+                ok &= np.abs(_angle(N[v], N[w]) - _angle(na[0], nb[0])) <= np.hypot(na[2], nb[2])
+            v, w = v[ok], w[ok]
+        vs.append(v)
+        ws.append(w)
+    return np.concatenate(vs), np.concatenate(ws)
+
+
+def _frames(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """The frames ``(..., 3, 3)`` (columns: along ``ab``, in the plane towards ``c``, the plane's normal)
+    of triangles ``a, b, c (..., 3)``; element-wise arithmetic."""
+    e1 = b - a
+    e1 = e1 / np.linalg.norm(e1, axis=-1, keepdims=True)
+    e3 = np.cross(e1, c - a)
+    e3 = e3 / np.maximum(np.linalg.norm(e3, axis=-1, keepdims=True), 1e-300)
+    return np.stack([e1, np.cross(e3, e1), e3], axis=-1)
+
+
+def _triangle_poses(P, N, x, normals, sd, tri, tol):
+    """Every pose putting the contacts ``tri = (a, b, c)`` of ``x`` on a triangle of places with the same
+    sides (within ``tol``) and normals alike (:func:`_pairs`), in parts of about :data:`CHUNK` poses
+    (so that a model whose places hold millions of such triangles is screened in bounded memory):
+    yields ``R (h, 3, 3), t (h, 3)``."""
+    a, b, c = tri
+
+    def side(i, j):
+        length = float(np.linalg.norm(x[j] - x[i]))
+        u = (x[j] - x[i]) / length
+        ends = [None if not (np.isfinite(normals[k, 0]) and np.isfinite(sd[k])) else
+                (normals[k], float(_angle(normals[k], u)), ANGLE * float(sd[k])) for k in (i, j)]
+        return _pairs(P, N, length, tol, *ends)
+
+    v1, w1 = side(a, b)
+    v2, w2 = side(a, c)
+    if not len(v1) or not len(v2):
+        return
+    # join the pairs that share a's place: each (v, w) of ab with each (v, u) of ac
+    o1, o2 = np.argsort(v1, kind="stable"), np.argsort(v2, kind="stable")
+    v1, w1, v2, w2 = v1[o1], w1[o1], v2[o2], w2[o2]
+    first = np.searchsorted(v2, v1, side="left")
+    count = np.searchsorted(v2, v1, side="right") - first
+    ends = np.cumsum(count)
+    bc = float(np.linalg.norm(x[c] - x[b]))
+    F_data = _frames(x[a], x[b], x[c])
+    lo = 0
+    while lo < len(v1):
+        hi = max(lo + 1, int(np.searchsorted(ends, (ends[lo - 1] if lo else 0) + CHUNK, side="right")))
+        part = np.arange(lo, hi)
+        rows = np.repeat(part, count[part])
+        cols = np.repeat(first[part] - (ends[part] - count[part]), count[part]) + \
+            np.arange(ends[lo - 1] if lo else 0, ends[hi - 1])
+        va, wb, wc = v1[rows], w1[rows], w2[cols]
+        keep = np.abs(np.linalg.norm(P[wc] - P[wb], axis=1) - bc) <= tol
+        va, wb, wc = va[keep], wb[keep], wc[keep]
+        lo = hi
+        if len(va):
+            R = np.einsum("hij,kj->hik", _frames(P[va], P[wb], P[wc]), F_data)      # element-wise: no BLAS
+            yield R, P[va] - np.einsum("hij,j->hi", R, x[a])
+
+
+def _agree(model, R, t, x, normals, sd) -> np.ndarray:
+    """Whether each pose's model normals agree with the contacts' ``(h,)``: the sum over the contacts
+    with a stated uncertainty of their squared angles to the model's normals in units of it is a
+    chi-square of two degrees of freedom a contact when the pose is the truth; a pose agrees when
+    that sum lies within the quantile :data:`SIGMAS` standard normal deviations out (the fit test's
+    allowance).  A normal without its uncertainty tests nothing."""
+    from scipy.stats import chi2, norm
+
+    test = np.isfinite(sd) & np.isfinite(normals[:, 0])
+    if not test.any():
+        return np.ones(len(R), dtype=bool)
+    _, n = model.planes(transform(R, t, x[test]))
+    turned = np.einsum("hij,kj->hki", R, normals[test])
+    total = np.sum((_angle(turned, n) / sd[test]) ** 2, axis=1)
+    return total <= chi2.isf(norm.sf(SIGMAS), 2 * int(test.sum()))
+
+
+def contact_stage(held, indices, touch, limit: float) -> list[Registration]:
+    """A runner's stage: each model of ``indices`` posed on the contacts of ``touch`` (a
+    :class:`~tactrec.features.Touch` of a ``contacts`` touch; see the module text).  The triangles are
+    posed in turn until one's best pose agreeing with the normals is a fit: its mean distance within
+    ``limit`` (data units, the touch's :func:`~tactrec.probability.plausible_fit`)."""
+    from ..registration.solver import Criteria, solve
+    from .kernels import field_best, field_refine
+
+    out = []
+    for i in indices:
+        model = held.entries[i].model
+        name = held.entries[i].name
+        if model.kind != "mesh":
+            out.append(Registration(name, np.inf, outcome=Outcome.REJECTED,
+                                    reason="contacts are posed on meshes only"))
+            continue
+        scale = touch_scale(held.entries[i], touch)
+        c = touch.data.contacts
+        x = c.points * scale
+        limit_model = limit * scale
+        P, N, reach = _places(model)
+        tol = 2.0 * reach + SIGMAS * np.sqrt(2.0) * touch.noise * scale
+        field, tried, found = model.distance_field, 0, None
+        for tri in triangles(x, TRIANGLES):
+            R, t, score = np.zeros((0, 3, 3)), np.zeros((0, 3)), np.zeros(0)
+            for Rc, tc in _triangle_poses(P, N, x, c.normals, c.normal_sd, tri, tol):
+                tried += len(Rc)
+                sc, _ = field_best(*field.args(), np.ascontiguousarray(Rc), np.ascontiguousarray(tc),
+                                   np.ascontiguousarray(x[None]))
+                R, t, score = np.concatenate([R, Rc]), np.concatenate([t, tc]), np.concatenate([score, sc])
+                best = stable_order(score)[:FIELD_KEEP]
+                R, t, score = R[best], t[best], score[best]
+            if not len(R):
+                continue
+            R, t, score = field_refine(*field.args(), np.ascontiguousarray(R), np.ascontiguousarray(t),
+                                       np.ascontiguousarray(x), FIELD_STEPS)
+            best = stable_order(score)[:KEEP]
+            fit = solve(model, R[best], t[best], x, Criteria(STEPS))
+            agree = _agree(model, fit.R, fit.t, x, c.normals, c.normal_sd)
+            if agree.any():
+                least = float(fit.error[agree].min())
+                if found is None or least < found[2]:
+                    found = fit, agree, least
+                if least <= limit_model:
+                    break                                       # a fit: no other triangle can do better
+        if found is None:
+            out.append(Registration(name, np.inf, outcome=Outcome.REJECTED,
+                                    reason="no places as far apart" if not tried else
+                                    "no pose agrees with the contacts' normals"))
+            continue
+        fit, agree, _ = found
+        order = sorted(np.flatnonzero(agree), key=lambda h: (fit.error[h], h))
+        h = order[0]
+        alternatives = np.concatenate([fit.R[order[1:]], fit.t[order[1:], :, None]], axis=2)
+        out.append(Registration(name, float(fit.error[h]), location=rotate(fit.R[h], x[0]) + fit.t[h],
+                                rotation=fit.R[h], translation=fit.t[h], scale=scale, candidates=int(tried),
+                                alternatives=alternatives))
+    return out
+
+
+def touch_scale(entry, touch) -> float:
+    """The factor from the touch's units to the model's (1 where either has none)."""
+    from ..units import conversion
+
+    return float(conversion(touch.data.units, entry.model.units))
