@@ -13,7 +13,7 @@ def cmd_simulate(args, *, floats) -> int:
     """``tactrec simulate MODEL --out DATA``: a simulated touch, as a real sensor records it with the sensor options."""
     from .io.touch import save_touch
     from .sensor import Imperfections
-    from .simulation import simulate_patch, simulate_random_touch, simulate_touch
+    from .simulation import simulate_contacts, simulate_patch, simulate_random_touch, simulate_touch
     from .surfaces import load_model
 
     model = load_model(args.model, units=args.units, scale=args.scale)
@@ -38,6 +38,11 @@ def cmd_simulate(args, *, floats) -> int:
                  sensor_frame=not args.model_frame)
     if args.patch is None and any(x is not None for x in (args.pitch, args.blur, args.depth)):
         raise InputError("--pitch, --blur and --depth are for a patch: give --patch RADIUS", "tactrec simulate")
+    if args.contacts is not None and (args.patch is not None or given):
+        raise InputError("--contacts spreads its contacts over the object: give no --patch, --at, --uv or --vertex",
+                         "tactrec simulate")
+    if args.contacts is None and args.normal_sd is not None:
+        raise InputError("--normal-sd is for contacts: give --contacts N", "tactrec simulate")
     try:
         if args.at is not None:
             site = model.locate(floats(args.at, 3, "--at"))
@@ -47,7 +52,10 @@ def cmd_simulate(args, *, floats) -> int:
             site = np.array([args.vertex])
         else:
             site = None
-        if args.patch is not None:
+        if args.contacts is not None:
+            data = simulate_contacts(model, args.contacts, noise=args.noise, normal_sd=args.normal_sd or 0.0,
+                                     sensor_frame=not args.model_frame, rng=rng)
+        elif args.patch is not None:
             patch = {k: v for k, v in patch.items() if v is not None}
             data = (simulate_patch(model, site, rng=rng, **patch) if site is not None
                     else simulate_random_touch(model, rng=rng, maker=simulate_patch, **patch))
@@ -61,6 +69,9 @@ def cmd_simulate(args, *, floats) -> int:
     save_touch(data, args.out)
     if not args.quiet:
         t = data.meta["truth"]
+        if data.contacts is not None:
+            print(f"{args.out}: {len(data.contacts)} contacts on {model.name}")
+            return 0
         if data.patch is not None:
             print(f"{args.out}: a patch of {len(data.patch.points)} points, radius {args.patch:g}, pitch "
                   f"{data.patch.pitch:.4g}, on {model.name} at ({', '.join(f'{x:.4g}' for x in t['contact'])})")
@@ -108,6 +119,12 @@ def add_simulate_parser(sub, *, count, positive, nonnegative, mesh_options):
     gel.add_argument("--pitch", type=positive, help="the pixels' spacing (default: about 400 pixels in the disc)")
     gel.add_argument("--blur", type=nonnegative, help="the gel's smoothing, a Gaussian of this sigma (default 0)")
     gel.add_argument("--depth", type=positive, help="the deepest the sensor sees below its plane (default RADIUS)")
+    single = p.add_argument_group("single contacts, as a probe or a force/torque sensor records them (--noise: "
+                                  "each point's Gaussian sigma)")
+    single.add_argument("--contacts", type=count(1), metavar="N", help="N contacts spread over the object (uniform "
+                        "over its area) instead of curves")
+    single.add_argument("--normal-sd", type=nonnegative, metavar="DEG", help="each normal's tilt, a Gaussian of "
+                        "this many degrees per direction (default 0)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     mesh_options(p)
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")

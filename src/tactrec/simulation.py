@@ -26,7 +26,7 @@ from .surfaces.base import SurfaceModel
 
 __all__ = ["simulate_touch", "simulate_random_touch", "random_rigid_motion", "spread_vertices", "sensor_to_world",
            "truth_pose", "truth_contact",
-           "simulate_world_touch", "simulate_patch", "PATCH_POINTS"]
+           "simulate_world_touch", "simulate_patch", "simulate_contacts", "PATCH_POINTS"]
 
 #: the pixels a simulated patch holds by default (its pitch follows from its radius)
 PATCH_POINTS = 400
@@ -296,3 +296,55 @@ def simulate_patch(model: SurfaceModel, site, *, radius: float, pitch: float | N
              "patch": {"radius": radius, "pitch": pitch, "noise": noise, "blur": blur, "depth": depth}}
     return TactileData.from_patch(parse_patch(obj, source), units=units or model.units, meta={"truth": truth},
                                   source=source)
+
+
+def simulate_contacts(model: SurfaceModel, count: int, *, noise: float = 0.0, normal_sd: float = 0.0,
+                      sensor_frame: bool = True, units: str | None = None, rng=None) -> TactileData:
+    """``count`` single contacts spread over ``model``: on a mesh, points uniform over its area (the
+    faces chosen by area) with their faces' normals; on a closed-form surface, random sites with their
+    normals.  Gaussian noise of sigma ``noise`` on every coordinate (stated as each contact's
+    ``point_sd`` when > 0); each normal tilted by a Gaussian of ``normal_sd`` degrees per tangent
+    direction (stated as its ``normal_sd_deg`` when > 0).  In a random sensor frame unless
+    ``sensor_frame`` is false; the truth as :func:`simulate_touch`'s, with every true contact."""
+    from .io.contacts import parse_contacts
+
+    if not (isinstance(count, (int, np.integer)) and count >= 1):
+        raise ValueError(f"count must be a whole number >= 1, got {count!r}")
+    rng = np.random.default_rng(rng)
+    if model.kind == "mesh":
+        area = model.face_areas
+        face = rng.choice(len(area), size=count, p=area / area.sum())
+        u, v = rng.random(count), rng.random(count)
+        flip = u + v > 1
+        u[flip], v[flip] = 1 - u[flip], 1 - v[flip]
+        corner = model.vertices[model.faces[face]]
+        points = corner[:, 0] + u[:, None] * (corner[:, 1] - corner[:, 0]) + v[:, None] * (corner[:, 2] - corner[:, 0])
+        normals = model.face_normals[face]
+    else:
+        frames = [model.site_frame(s) for s in model.random_sites(count, rng=rng)]
+        points = np.array([f.point for f in frames])
+        normals = np.array([f.normal for f in frames])
+    seen = points + rng.normal(0.0, noise, size=points.shape) if noise > 0 else points
+    tilt = normals.copy()
+    if normal_sd > 0:
+        d1 = np.cross(normals, np.eye(3)[np.argmin(np.abs(normals), axis=1)])
+        d1 /= np.linalg.norm(d1, axis=1, keepdims=True)
+        d2 = np.cross(normals, d1)
+        a, b = (np.tan(np.deg2rad(rng.normal(0.0, normal_sd, size=count)))[:, None] for _ in range(2))
+        tilt = normals + a * d1 + b * d2
+        tilt /= np.linalg.norm(tilt, axis=1, keepdims=True)
+    R, t = (random_rigid_motion(rng, extent=model.size) if sensor_frame else (np.eye(3), np.zeros(3)))
+    items = []
+    for p, n in zip(times(seen, R.T) + t, times(tilt, R.T)):
+        item = {"point": p.tolist(), "normal": n.tolist()}
+        if normal_sd > 0:
+            item["normal_sd_deg"] = float(normal_sd)
+        if noise > 0:
+            item["point_sd"] = float(noise)
+        items.append(item)
+    source = f"<simulated {model.name}>"
+    truth = {"model": model.name, "contact": points[0].tolist(), "normal": normals[0].tolist(),
+             "contacts": points.tolist(), "rotation": R.T.tolist(), "translation": (-rotate(R.T, t)).tolist(),
+             "noise": {"point": noise, "normal_deg": normal_sd}}
+    return TactileData.from_contacts(parse_contacts(items, source), units=units or model.units,
+                                     meta={"truth": truth}, source=source)
