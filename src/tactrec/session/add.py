@@ -8,6 +8,7 @@ leaves the session as it was.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
 import numpy as np
@@ -79,7 +80,7 @@ class Add:
         self.searches.append(own)
         self.fit = JointFit(self.recognizer, self.touches, self.misses, self._joint, self.searches)
         self.result = self.timed("joint", self.fit)
-        if joint_search and earlier and self.recognizer.method.scores_context:
+        if joint_search and earlier and self.recognizer.method.scores_context and world.contacts is None:
             self._search_jointly(slipped, own.work)
         return self.result
 
@@ -97,6 +98,8 @@ class Add:
         the touch rules them all out and the whole catalogue is searched, that search its own (the
         first one's seconds count in the add's ``own`` stage).  A session's later touches cost what
         its standing models cost, not what the catalogue does."""
+        if world.contacts is not None:
+            return self._pooled(world, slipped)
         standing = self.standing(slipped)
         if standing and len(standing) < len(self.recognizer.models):
             first = self.recognizer.recognize(world, among=standing)
@@ -104,6 +107,27 @@ class Add:
             if errors and fits(min(errors), fit_limit(first.touch, self.touches.floor), len(first.touch.points)):
                 return first
         return self.recognizer.recognize(world)
+
+    def _pooled(self, world, slipped: set):
+        """Step 1 for a touch of contacts: a contact alone poses nothing, so its search is that of every
+        contact of the session's kept touches of contacts and its own together (world frame,
+        :mod:`tactrec.engine.contacts`); the recognition is given the touch's own features, so that
+        each contact counts once in the joint fits.  Until they can be posed
+        (:func:`tactrec.io.contacts.spread_problem`) no model is searched."""
+        from ..features import Touch
+        from ..io.contacts import spread_problem
+        from ..io.touch import TactileData
+
+        pooled = world.contacts
+        for i, r in enumerate(self.touches.records):
+            if i not in slipped and r.world.contacts is not None:
+                pooled = r.world.contacts.joined(pooled)
+        own = Touch.from_data(world)
+        problem = spread_problem(pooled)
+        if problem is not None:
+            return self.recognizer.unposed(own, problem)
+        found = self.recognizer.recognize(TactileData.from_contacts(pooled, units=world.units, source=world.source))
+        return dataclasses.replace(found, touch=own)
 
     # ------------------------------------------------------------------ step 5
     def kept(self) -> list[int]:
@@ -126,7 +150,7 @@ class Add:
         touches = self.touches
         use = [i for i in range(len(touches)) if i not in slipped]
         fit = touches.pooled(touches.reference()[use], use)
-        starts = use[::-1][:STARTS]
+        starts = [i for i in use[::-1] if touches.records[i].world.contacts is None][:STARTS]
         for rivals in (False, True):
             budget = np.inf if self.search_budget is None or work <= 0 else self.search_budget * work
             for start in starts:
