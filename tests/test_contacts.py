@@ -1,0 +1,102 @@
+"""Touches of single contacts (tactrec.io.contacts, tactrec.engine.contacts, simulate --contacts)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from conftest import small_meshes
+from tactrec.cli import main
+from tactrec.io.touch import load_touch, parse_touch
+from tactrec.recognition import Recognizer
+from tactrec.simulation import simulate_contacts, truth_pose
+
+from test_bad_input import bad
+
+POINT = [1.0, 2.0, 3.0]
+
+
+@pytest.fixture(scope="module")
+def meshes():
+    return small_meshes(coarse=True)
+
+
+def test_a_file_of_contacts_round_trips(tmp_path, meshes):
+    data = simulate_contacts(meshes[0].model, 5, noise=0.1, normal_sd=4.0, rng=3)
+    again = parse_touch(json.loads(json.dumps(data.to_json())), "again")
+    assert again.kind == "contacts"
+    for a, b in zip(again.contacts.__dict__.values(), data.contacts.__dict__.values()):
+        np.testing.assert_array_equal(a, b)
+    plain = parse_touch({"contacts": [{"point": POINT}, {"point": [4, 5, 6], "normal": [0, 0, 2]}]}, "plain")
+    assert not plain.contacts.has_normal[0] and plain.contacts.normals[1].tolist() == [0.0, 0.0, 1.0]
+    assert plain.contacts.noise == 0.0                     # no point_sd: read as exact
+
+
+@pytest.mark.parametrize("contacts, problem", [
+    ([], "non-empty list"),
+    ([{"normal": [0, 0, 1]}], "must be an object with a 'point'"),
+    ([{"point": POINT, "normal": [0, 0, 0]}], "non-zero direction"),
+    ([{"point": POINT, "normal_sd_deg": 5}], "without a 'normal'"),
+    ([{"point": POINT, "normal": [0, 0, 1], "normal_sd_deg": 0}], "must lie in (0, 90]"),
+    ([{"point": POINT, "point_sd": -1}], "'point_sd' must be >= 0"),
+    ([{"point": POINT, "force": 3}], "unknown field 'force'"),
+    ([{"point": [1, 2, float("nan")]}], "not finite"),
+])
+def test_bad_contacts_get_one_line(tmp_path, capsys, meshes, contacts, problem):
+    path = tmp_path / "touch.json"
+    path.write_text(json.dumps({"units": "mm", "contacts": contacts}).replace("NaN", "1e999"))
+    problem = "too large" if "not finite" in problem else problem
+    bad(capsys, ["recognize", path, "--models", "sphere-33"], path, problem)
+
+
+def test_contacts_too_few_or_on_one_line_are_refused(tmp_path, capsys):
+    path = tmp_path / "two.json"
+    path.write_text(json.dumps({"units": "mm", "contacts": [{"point": [0, 0, 0], "normal": [0, 0, 1]},
+                                                             {"point": [5, 0, 0], "normal": [0, 0, 1]}]}))
+    bad(capsys, ["recognize", path, "--models", "sphere-33"], path, "at least 3 are needed")
+    line = tmp_path / "line.json"
+    line.write_text(json.dumps({"units": "mm", "contacts": [{"point": [k, 0, 0], "normal": [0, 0, 1]}
+                                                             for k in range(4)]}))
+    bad(capsys, ["recognize", line, "--models", "sphere-33"], line, "without enough spread")
+    both = tmp_path / "both.json"
+    both.write_text(json.dumps({"contacts": [{"point": POINT}], "outward": [0, 0, 1]}))
+    bad(capsys, ["recognize", both, "--models", "sphere-33"], both, "takes no 'outward'")
+
+
+def test_simulate_contacts_writes_a_touch_that_loads(tmp_path, capsys):
+    out = tmp_path / "c.json"
+    assert main(["simulate", "sphere-33", "--contacts", "7", "--noise", "0.05", "--normal-sd", "3", "--out",
+                 str(out), "--quiet"]) == 0
+    data = load_touch(out)
+    assert data.kind == "contacts" and len(data.contacts) == 7
+    assert np.all(data.contacts.normal_sd == 3.0) and np.all(data.contacts.point_sd == 0.05)
+    bad(capsys, ["simulate", "sphere-33", "--normal-sd", "3", "--out", tmp_path / "x.json"], "simulate",
+        "--normal-sd is for contacts")
+
+
+def test_contacts_recognise_and_pose_the_small_meshes(meshes):
+    """Ten contacts (0.05 mm, normals 3 degrees) on three small meshes of distinct shapes (the capsule,
+    the brick, the ring), seven or six each: the right model at least 17 times in 20, never another
+    one surely, and the right answer's pose puts the true contacts within 1 mm of the surface they
+    came from."""
+    meshes = meshes[1:]
+    right = sure_wrong = 0
+    with Recognizer(meshes) as recognizer:
+        for k in range(20):
+            entry = meshes[k % 3]
+            data = simulate_contacts(entry.model, 10, noise=0.05, normal_sd=3.0, rng=np.random.default_rng([7, k]))
+            result = recognizer.recognize(data)
+            if result.best == entry.name:
+                right += 1
+                r = result.registration
+                truth = np.asarray(data.meta["truth"]["contacts"])
+                Rt, tt = truth_pose(data)
+                seen = (truth - tt) @ Rt                      # the true contacts in the data's frame
+                moved = seen @ r.rotation.T + r.translation
+                assert np.max(np.abs(entry.model.distance(moved))) < 1.0
+            elif result.best is not None and result.confidence >= 0.95:
+                sure_wrong += 1
+    assert right >= 17, right
+    assert sure_wrong == 0
