@@ -1,33 +1,40 @@
-"""Hypotheses from single contacts: poses from triangles of contacts, screened on a mesh's vertices.
+"""Hypotheses from single contacts: poses from triangles of contacts, screened on a mesh's field.
 
 A touch of contacts (:mod:`tactrec.io.contacts`) has no curvature to look
 up; what it has is distances.  Three contacts ``a, b, c`` span a triangle
 whose sides no pose changes, so each of the model's triangles of places
-with the same sides (within the places' spacing) poses the data: ``a, b, c``
-onto the three places, by the frames the triangles span (no fit, no BLAS).
-A contact's normal is a rotation-free test too: the angle between two
-contacts' normals, and each normal's angle to the chord between them, are
-the same on the model, within three of their standard deviations (a normal
+with the same sides poses the data: ``a, b, c`` onto the three places, by
+the frames the triangles span (no fit, no BLAS).  A contact's normal is a
+rotation-free test too: each normal's angle to the chord between two
+contacts, and the angle between their normals, are the same on the model
+within their stated uncertainty (:data:`ANGLE` standard deviations; a normal
 given without one tests nothing).
 
 Per model the search (:func:`contact_stage`):
 
-1. thins the mesh's vertices to about :data:`PLACES` places (one per grid
-   cell, :func:`tactrec.registration.mesh_fast.first_per_place`), each with
-   its fitted normal;
+1. places: of :data:`DENSE` x :data:`PLACES` points uniform over the mesh's
+   area (seeded; a mesh's vertices need not cover its surface), the first of
+   each grid cell, about :data:`PLACES` of them, each with its face's normal;
+   ``reach``, the farthest any of the points lies from its nearest place,
+   bounds how far a contact lies from one, so a pair of places matches a
+   pair of contacts whose distance is within ``2 reach`` (and three of the
+   points' standard deviations) of theirs;
 2. for each of up to :data:`TRIANGLES` triangles of contacts (the largest
-   first, then the largest with a new corner), takes every pair of places as
-   far apart as ``a`` and ``b`` (and alike in normals), joins the pairs that
-   share ``a``'s place with those as far apart as ``a`` and ``c``, keeps the
-   joins whose third side matches, and poses each;
-3. (per triangle, until one's best pose is a fit) screens every pose by all contacts (their distances to the nearest
-   vertices and their normals' angles to those vertices', :func:`_screen`), keeps the best :data:`KEEP`
-   and refines them on exact distances (:func:`tactrec.registration.solver.solve`,
-   every contact);
+   first, then the largest with a new corner), takes every pair of places
+   matching ``a`` and ``b`` (and alike in normals), joins the pairs that
+   share ``a``'s place with those matching ``a`` and ``c``, keeps the joins
+   whose third side matches, and poses each (:data:`CHUNK` at a time);
+3. screens every pose on the distance field by all contacts (mean truncated
+   distance, :func:`tactrec.engine.kernels.field_best`), gives the best
+   :data:`FIELD_KEEP` :data:`FIELD_STEPS` steps on the field
+   (:func:`~tactrec.engine.kernels.field_refine`) and refines the best
+   :data:`KEEP` of those on exact distances
+   (:func:`tactrec.registration.solver.solve`), every contact;
 4. keeps the pose of least mean distance among those whose normals agree
    with the model's (:func:`_agree`: a chi-square test of their angles
    under their stated uncertainties); the others that agree are its
-   alternatives.
+   alternatives.  Once a triangle's best such pose is a fit (within the
+   touch's plausible fit), no further triangle is posed.
 
 A model whose places hold no such triangle, or none of whose refined poses
 agrees with the contacts' normals, is rejected: six or fewer contacts fit
@@ -44,7 +51,8 @@ import numpy as np
 from ..linalg import rotate, stable_order, transform
 from ..registration.result import Outcome, Registration
 
-__all__ = ["contact_stage", "triangles", "PLACES", "KEEP", "TRIANGLES", "SIGMAS"]
+__all__ = ["contact_stage", "triangles", "PLACES", "DENSE", "FIELD_KEEP", "FIELD_STEPS", "KEEP", "TRIANGLES", "SIGMAS",
+           "ANGLE", "CHUNK"]
 
 #: about this many places per model (one per grid cell): the pairs of places number its square
 PLACES = 800

@@ -192,7 +192,8 @@ class Recognizer:
         :func:`~tactrec.io.meeting.find_contact`'s, and curves that miss each other (beyond their
         noise) are searched from each other meeting point too until one fits or ``budget`` is spent
         (:func:`.again.other_meetings`).  A touch with outliers is searched without its curves' ends,
-        then refitted (:func:`.again.judge_ends`)."""
+        then refitted (:func:`.again.judge_ends`).  A touch of single contacts is posed from triangles
+        of its contacts (:mod:`tactrec.engine.contacts`; ``budget`` does not apply)."""
         return self._recognize(data, None, among, budget)
 
     def recognize_jointly(self, data: TactileData, context: Context, *, among=None,

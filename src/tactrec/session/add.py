@@ -118,10 +118,11 @@ class Add:
         from ..io.contacts import spread_problem
         from ..io.touch import TactileData
 
-        pooled = world.contacts
-        for i, r in enumerate(self.touches.records):
+        pooled = None
+        for i, r in enumerate(self.touches.records):                  # in the order they were added
             if i not in slipped and r.world.contacts is not None:
-                pooled = r.world.contacts.joined(pooled)
+                pooled = r.world.contacts if pooled is None else pooled.joined(r.world.contacts)
+        pooled = world.contacts if pooled is None else pooled.joined(world.contacts)
         own = Touch.from_data(world)
         problem = spread_problem(pooled)
         if problem is not None:
