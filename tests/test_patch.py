@@ -82,8 +82,7 @@ def test_a_patch_file_round_trips_and_reads_as_points(tmp_path, sphere):
 
 def test_bad_patches_get_one_line(tmp_path, capsys):
     """A map mostly null, a patch of a few points, a hole around the middle, a patch beside curves, a patch
-    with a contact, a sensor pose that is no rotation, and single contacts (not read by this version):
-    each one line naming the file, exit status 2."""
+    with a contact, and a sensor pose that is no rotation: each one line naming the file, exit status 2."""
     big = [[0.0] * 9 for _ in range(9)]
     holed = [[None if (i + j) % 3 else 0.0 for j in range(9)] for i in range(9)]
     middle = [[None if abs(i - 4) <= 1 and abs(j - 4) <= 1 else 0.01 * (i * i + j * j) for j in range(9)]
@@ -94,8 +93,7 @@ def test_bad_patches_get_one_line(tmp_path, capsys):
              ({"patch": {"height": big, "pitch": 0.5}, "curves": [[[0, 0, 0]]]}, "one of"),
              ({"patch": {"height": big, "pitch": 0.5}, "contact": [0, 0, 0]}, "no 'contact'"),
              ({"patch": {"height": big, "pitch": 0.5, "sensor": {"rotation": [[2, 0, 0], [0, 1, 0], [0, 0, 1]],
-                                                                  "translation": [0, 0, 0]}}}, "rotation"),
-             ({"contacts": [{"point": [0, 0, 0]}]}, "single contacts")]
+                                                                  "translation": [0, 0, 0]}}}, "rotation")]
     for k, (obj, problem) in enumerate(cases):
         path = tmp_path / f"bad{k}.json"
         path.write_text(json.dumps(obj))
