@@ -307,19 +307,13 @@ def simulate_contacts(model: SurfaceModel, count: int, *, noise: float = 0.0, no
     direction (stated as its ``normal_sd_deg`` when > 0).  In a random sensor frame unless
     ``sensor_frame`` is false; the truth as :func:`simulate_touch`'s, with every true contact."""
     from .io.contacts import parse_contacts
+    from .surfaces.mesh_table import area_samples
 
     if not (isinstance(count, (int, np.integer)) and count >= 1):
         raise ValueError(f"count must be a whole number >= 1, got {count!r}")
     rng = np.random.default_rng(rng)
     if model.kind == "mesh":
-        area = model.face_areas
-        face = rng.choice(len(area), size=count, p=area / area.sum())
-        u, v = rng.random(count), rng.random(count)
-        flip = u + v > 1
-        u[flip], v[flip] = 1 - u[flip], 1 - v[flip]
-        corner = model.vertices[model.faces[face]]
-        points = corner[:, 0] + u[:, None] * (corner[:, 1] - corner[:, 0]) + v[:, None] * (corner[:, 2] - corner[:, 0])
-        normals = model.face_normals[face]
+        points, normals = area_samples(model, count, rng)
     else:
         frames = [model.site_frame(s) for s in model.random_sites(count, rng=rng)]
         points = np.array([f.point for f in frames])

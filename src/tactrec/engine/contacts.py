@@ -96,19 +96,6 @@ def triangles(points: np.ndarray, count: int) -> list[tuple[int, int, int]]:
     return out
 
 
-def _surface(model, count: int, rng) -> tuple[np.ndarray, np.ndarray]:
-    """``count`` points uniform over the mesh's area (faces chosen by area, seeded ``rng``) and their
-    faces' normals: a mesh's vertices need not cover its surface (a cylinder's long facets)."""
-    area = model.face_areas
-    face = rng.choice(len(area), size=count, p=area / area.sum())
-    u, v = rng.random(count), rng.random(count)
-    flip = u + v > 1
-    u[flip], v[flip] = 1 - u[flip], 1 - v[flip]
-    corner = model.vertices[model.faces[face]]
-    return corner[:, 0] + u[:, None] * (corner[:, 1] - corner[:, 0]) + v[:, None] * (corner[:, 2] - corner[:, 0]), \
-        model.face_normals[face]
-
-
 def _places(model):
     """The mesh ``model``'s places for contacts, built once: of :data:`DENSE` x :data:`PLACES` points
     uniform over its area (seeded), the first of each grid cell about :data:`PLACES` cover (positions
@@ -116,9 +103,11 @@ def _places(model):
     from its nearest place."""
     from scipy.spatial import cKDTree
 
+    from ..surfaces.mesh_table import area_samples
+
     memo = model.search_memo
     if "contact_places" not in memo:
-        dense, normals = _surface(model, DENSE * PLACES, np.random.default_rng(0))
+        dense, normals = area_samples(model, DENSE * PLACES, np.random.default_rng(0))
         size = float(np.sqrt(model.area / PLACES))
         cells = np.floor((dense - dense.min(axis=0)) / size).astype(np.int64)
         _, first = np.unique(cells, axis=0, return_index=True)
@@ -233,6 +222,7 @@ def contact_stage(held, indices, touch, limit: float) -> list[Registration]:
     posed in turn until one's best pose agreeing with the normals is a fit: its mean distance within
     ``limit`` (data units, the touch's :func:`~tactrec.probability.plausible_fit`)."""
     from ..registration.solver import Criteria, solve
+    from ..units import conversion
     from .kernels import field_best, field_refine
 
     out = []
@@ -243,7 +233,7 @@ def contact_stage(held, indices, touch, limit: float) -> list[Registration]:
             out.append(Registration(name, np.inf, outcome=Outcome.REJECTED,
                                     reason="contacts are posed on meshes only"))
             continue
-        scale = touch_scale(held.entries[i], touch)
+        scale = float(conversion(touch.data.units, getattr(model, "units", None)))
         c = touch.data.contacts
         x = c.points * scale
         limit_model = limit * scale
@@ -285,10 +275,3 @@ def contact_stage(held, indices, touch, limit: float) -> list[Registration]:
                                 rotation=fit.R[h], translation=fit.t[h], scale=scale, candidates=int(tried),
                                 alternatives=alternatives))
     return out
-
-
-def touch_scale(entry, touch) -> float:
-    """The factor from the touch's units to the model's (1 where either has none)."""
-    from ..units import conversion
-
-    return float(conversion(touch.data.units, entry.model.units))

@@ -1,5 +1,5 @@
 """The paper's lookup table on a triangle mesh (Section 5.2): sampled vertices and their principal
-curvatures by paraboloid fits (eq. 14)."""
+curvatures by paraboloid fits (eq. 14); and points sampled uniformly over a mesh's area."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 from .base import TableSamples
 from .mesh_curvature import paraboloid_curvatures
 
-__all__ = ["sample_vertices", "vertex_curvatures", "table_samples"]
+__all__ = ["sample_vertices", "vertex_curvatures", "table_samples", "area_samples"]
 
 
 def sample_vertices(model, *, theta: float = np.pi / 8, max_ring: int = 6, min_ring: int = 2,
@@ -56,3 +56,17 @@ def table_samples(model, *, rng=0) -> TableSamples:
     sample = sample[keep]
     return TableSamples(sample[:, None].astype(np.float64), model.vertices[sample], model.vertex_normals[sample],
                         k1[keep], k2[keep])
+
+
+def area_samples(model, count: int, rng) -> tuple[np.ndarray, np.ndarray]:
+    """``count`` points uniform over the area of the mesh ``model`` (faces chosen by area, then a point
+    uniform in each, drawn from the generator ``rng``) and their faces' normals, ``(count, 3)`` each: a
+    mesh's vertices need not cover its surface (a cylinder's long facets)."""
+    area = model.face_areas
+    face = rng.choice(len(area), size=count, p=area / area.sum())
+    u, v = rng.random(count), rng.random(count)
+    flip = u + v > 1
+    u[flip], v[flip] = 1 - u[flip], 1 - v[flip]
+    corner = model.vertices[model.faces[face]]
+    points = corner[:, 0] + u[:, None] * (corner[:, 1] - corner[:, 0]) + v[:, None] * (corner[:, 2] - corner[:, 0])
+    return points, model.face_normals[face]
