@@ -24,12 +24,19 @@ Per model the search (:func:`contact_stage`):
    matching ``a`` and ``b`` (and alike in normals), joins the pairs that
    share ``a``'s place with those matching ``a`` and ``c``, keeps the joins
    whose third side matches, and poses each (:data:`CHUNK` at a time);
-3. screens every pose on the distance field by all contacts (mean truncated
-   distance, :func:`tactrec.engine.kernels.field_best`), gives the best
-   :data:`FIELD_KEEP` :data:`FIELD_STEPS` steps on the field
+3. screens every pose on the distance field by all contacts and their
+   normals (mean truncated distance, :func:`tactrec.engine.kernels.field_best`),
+   gives the best :data:`FIELD_KEEP` :data:`FIELD_STEPS` steps on the field
    (:func:`~tactrec.engine.kernels.field_refine`) and refines the best
    :data:`KEEP` of those on exact distances
-   (:func:`tactrec.registration.solver.solve`), every contact;
+   (:func:`tactrec.registration.solver.solve`).  A normal takes part in
+   these steps as four points on the contact's tangent plane
+   (:func:`tangent_points`), each where a tilt of one standard deviation
+   lifts it by the touch's fit limit: a pose that turns the
+   normal off the model's lifts them off the surface, so the one
+   point-to-plane step fits positions and normals together, each weighed by
+   its uncertainty.  Three contacts fit a family of poses by their distances
+   alone, and distances alone would slide a start along it to any of them;
 4. keeps the pose of least mean distance among those whose normals agree
    with the model's (:func:`_agree`: a chi-square test of their angles
    under their stated uncertainties); the others that agree are its
@@ -51,8 +58,8 @@ import numpy as np
 from ..linalg import rotate, stable_order, transform
 from ..registration.result import Outcome, Registration
 
-__all__ = ["contact_stage", "triangles", "PLACES", "DENSE", "FIELD_KEEP", "FIELD_STEPS", "KEEP", "TRIANGLES", "SIGMAS",
-           "ANGLE", "CHUNK"]
+__all__ = ["contact_stage", "tangent_points", "triangles", "PLACES", "DENSE", "FIELD_KEEP", "FIELD_STEPS", "KEEP",
+           "TRIANGLES", "SIGMAS", "ANGLE", "CHUNK"]
 
 #: about this many places per model (one per grid cell): the pairs of places number its square
 PLACES = 800
@@ -75,6 +82,23 @@ ANGLE = float(np.sqrt(-2.0 * np.log(0.5 * math.erfc(SIGMAS / math.sqrt(2.0)))))
 CHUNK = 200_000
 #: exact refinement steps
 STEPS = 30
+
+
+def tangent_points(x: np.ndarray, normals: np.ndarray, sd: np.ndarray, fit: float) -> np.ndarray:
+    """The contacts ``x (n, 3)`` and, for each with a normal and its uncertainty ``sd`` (degrees), four
+    points on its tangent plane, ``+-s`` along two directions across the normal, ``s = fit /
+    radians(sd)``: a tilt of one standard deviation lifts them by ``fit`` (data units, the touch's fit
+    limit), what a point's noise moves it by.  ``(n + 4 k, 3)``, the contacts first."""
+    out = [x]
+    for p, n, a in zip(x, normals, sd):
+        if not (np.isfinite(n[0]) and np.isfinite(a) and a > 0 and fit > 0):
+            continue
+        d1 = np.cross(n, np.eye(3)[int(np.argmin(np.abs(n)))])
+        d1 = d1 / np.linalg.norm(d1)
+        d2 = np.cross(n, d1)
+        s = float(fit) / math.radians(float(a))
+        out.append(np.array([p + s * d1, p - s * d1, p + s * d2, p - s * d2]))
+    return np.concatenate(out)
 
 
 def triangles(points: np.ndarray, count: int) -> list[tuple[int, int, int]]:
@@ -216,11 +240,12 @@ def _agree(model, R, t, x, normals, sd) -> np.ndarray:
     return total <= chi2.isf(norm.sf(SIGMAS), 2 * int(test.sum()))
 
 
-def contact_stage(held, indices, touch, limit: float) -> list[Registration]:
+def contact_stage(held, indices, touch, limit: float, fit: float) -> list[Registration]:
     """A runner's stage: each model of ``indices`` posed on the contacts of ``touch`` (a
     :class:`~tactrec.features.Touch` of a ``contacts`` touch; see the module text).  The triangles are
     posed in turn until one's best pose agreeing with the normals is a fit: its mean distance within
-    ``limit`` (data units, the touch's :func:`~tactrec.probability.plausible_fit`)."""
+    ``limit`` (data units, the touch's :func:`~tactrec.probability.plausible_fit`); ``fit``: its fit
+    limit (data units, :func:`tangent_points`)."""
     from ..registration.solver import Criteria, solve
     from ..units import conversion
     from .kernels import field_best, field_refine
@@ -236,6 +261,7 @@ def contact_stage(held, indices, touch, limit: float) -> list[Registration]:
         scale = float(conversion(touch.data.units, getattr(model, "units", None)))
         c = touch.data.contacts
         x = c.points * scale
+        xa = np.ascontiguousarray(tangent_points(x, c.normals, c.normal_sd, fit * scale))
         limit_model = limit * scale
         P, N, reach = _places(model)
         tol = 2.0 * reach + SIGMAS * np.sqrt(2.0) * touch.noise * scale
@@ -244,22 +270,22 @@ def contact_stage(held, indices, touch, limit: float) -> list[Registration]:
             R, t, score = np.zeros((0, 3, 3)), np.zeros((0, 3)), np.zeros(0)
             for Rc, tc in _triangle_poses(P, N, x, c.normals, c.normal_sd, tri, tol):
                 tried += len(Rc)
-                sc, _ = field_best(*field.args(), np.ascontiguousarray(Rc), np.ascontiguousarray(tc),
-                                   np.ascontiguousarray(x[None]))
+                sc, _ = field_best(*field.args(), np.ascontiguousarray(Rc), np.ascontiguousarray(tc), xa[None])
                 R, t, score = np.concatenate([R, Rc]), np.concatenate([t, tc]), np.concatenate([score, sc])
                 best = stable_order(score)[:FIELD_KEEP]
                 R, t, score = R[best], t[best], score[best]
             if not len(R):
                 continue
-            R, t, score = field_refine(*field.args(), np.ascontiguousarray(R), np.ascontiguousarray(t),
-                                       np.ascontiguousarray(x), FIELD_STEPS)
+            R, t, score = field_refine(*field.args(), np.ascontiguousarray(R), np.ascontiguousarray(t), xa,
+                                       FIELD_STEPS)
             best = stable_order(score)[:KEEP]
-            fit = solve(model, R[best], t[best], x, Criteria(STEPS))
-            agree = _agree(model, fit.R, fit.t, x, c.normals, c.normal_sd)
+            refined = solve(model, R[best], t[best], xa, Criteria(STEPS))
+            error = np.abs(model.planes(transform(refined.R, refined.t, x))[0]).mean(axis=1)   # the contacts'
+            agree = _agree(model, refined.R, refined.t, x, c.normals, c.normal_sd)
             if agree.any():
-                least = float(fit.error[agree].min())
-                if found is None or least < found[2]:
-                    found = fit, agree, least
+                least = float(error[agree].min())
+                if found is None or least < found[3]:
+                    found = refined, error, agree, least
                 if least <= limit_model:
                     break                                       # a fit: no other triangle can do better
         if found is None:
@@ -267,11 +293,11 @@ def contact_stage(held, indices, touch, limit: float) -> list[Registration]:
                                     reason="no places as far apart" if not tried else
                                     "no pose agrees with the contacts' normals"))
             continue
-        fit, agree, _ = found
-        order = sorted(np.flatnonzero(agree), key=lambda h: (fit.error[h], h))
+        refined, error, agree, _ = found
+        order = sorted(np.flatnonzero(agree), key=lambda h: (error[h], h))
         h = order[0]
-        alternatives = np.concatenate([fit.R[order[1:]], fit.t[order[1:], :, None]], axis=2)
-        out.append(Registration(name, float(fit.error[h]), location=rotate(fit.R[h], x[0]) + fit.t[h],
-                                rotation=fit.R[h], translation=fit.t[h], scale=scale, candidates=int(tried),
+        alternatives = np.concatenate([refined.R[order[1:]], refined.t[order[1:], :, None]], axis=2)
+        out.append(Registration(name, float(error[h]), location=rotate(refined.R[h], x[0]) + refined.t[h],
+                                rotation=refined.R[h], translation=refined.t[h], scale=scale, candidates=int(tried),
                                 alternatives=alternatives))
     return out

@@ -250,8 +250,9 @@ class Recognizer:
         touch = Touch.from_data(data)
         indices = range(len(self.models)) if chosen is None else chosen
         within = float(getattr(self.config, "within", 3.0))
-        limit = plausible_fit(fit_limit(touch, self.floor), touch.noise, len(touch.points), within)
-        found = dict(zip(indices, self.runner.map(contact_stage, list(indices), touch, limit)))
+        fit = fit_limit(touch, self.floor)
+        limit = plausible_fit(fit, touch.noise, len(touch.points), within)
+        found = dict(zip(indices, self.runner.map(contact_stage, list(indices), touch, limit, fit)))
         ranking = [found.get(i) or Registration(e.name, np.inf, outcome=Outcome.NOT_SEARCHED,
                                                 reason=NOT_SEARCHED)
                    for i, e in enumerate(self.models)]
