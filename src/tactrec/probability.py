@@ -68,17 +68,14 @@ the models within the search's ``ratio`` of the best, which its next round would
 *tied* (:attr:`Evidence.tied`): read at the best's distances, in the shares and the fit test, sharing
 evenly.  The answer is still the lowest error; how sure it is falls with each model tied to it.
 
-Nothing comes from a simulation setting: the scatter is the touch's own.
-The residuals are those of the points a touch kept: points off their
-curve's trace (:mod:`tactrec.outliers`) are no evidence for or against
-any model.
-Models the search rejected or deferred have no probability; the accepted
-models' probabilities and ``unknown``'s sum to one.  The replicates are drawn
-from a fixed seed and averaged without BLAS, so the same touch gives the same
-probabilities on every machine.  ``tactrec bench calibration`` and
-``tactrec bench open-world`` measure how well the confidence matches the
-share of right answers.  ``confidence`` is the best model's probability; a
-result is ``ambiguous`` when it is below :data:`AMBIGUOUS`.
+Nothing comes from a simulation setting: the scatter is the touch's own.  The residuals are those of
+the points a touch kept: points off their curve's trace (:mod:`tactrec.outliers`) are no evidence for or
+against any model.  Models the search rejected or deferred have no probability; the accepted models'
+probabilities and ``unknown``'s sum to one.  The replicates are drawn from a fixed seed and averaged
+without BLAS, so the same touch gives the same probabilities on every machine.  ``tactrec bench
+calibration`` and ``tactrec bench open-world`` measure how well the confidence matches the share of
+right answers.  ``confidence`` is the best model's probability; a result is ``ambiguous`` when it is
+below :data:`AMBIGUOUS`.
 """
 
 from __future__ import annotations
@@ -126,14 +123,17 @@ def most_probable(names: Sequence[str], probabilities: dict[str, float]) -> str 
 
 
 def resolution(touch, floor: float) -> float:
-    """The least distance of a point of ``touch`` to a model that is read as such (data units):
-    ``floor`` x its radius, the mean distance a fit of noise-free data may have (:func:`fit_limit`)."""
-    return float(floor) * float(touch.radius)
+    """The least distance of a point of ``touch`` to a model read as such (data units): ``floor`` x its
+    radius, what a fit of noise-free data may leave (:func:`fit_limit`); for single contacts, whose noise is
+    stated, at least a perfect fit's under it (:func:`noise_fit`): closer fits of a few contacts order nothing."""
+    least = float(floor) * float(touch.radius)
+    if getattr(getattr(touch, "data", None), "contacts", None) is not None:
+        least = max(least, noise_fit(touch.noise))
+    return least
 
 
 def noise_fit(sigma: float) -> float:
-    """The mean distance of a perfect fit under Gaussian noise of ``sigma`` per coordinate:
-    the half-normal's mean, ``sigma sqrt(2 / pi)``."""
+    """The mean distance of a perfect fit under Gaussian noise of ``sigma``: ``sigma sqrt(2 / pi)``."""
     return float(sigma) * np.sqrt(2.0 / np.pi)
 
 
@@ -151,9 +151,9 @@ def fit_standard_error(fit: float, points: int) -> float:
 
 
 def plausible_fit(limit: float, noise: float, points: int, within: float) -> float:
-    """The largest best error (data units) still a fit of ``points`` points of noise ``noise`` and fit
-    limit ``limit``: ``within`` standard errors of a fit above the limit, or the limit itself where the
-    noise's own spread stays below it (noise-free data, whose true pose fits far within it)."""
+    """The largest best error (data units) still a fit of ``points`` points of noise ``noise`` and fit limit
+    ``limit``: ``within`` standard errors of a fit above the limit, or the limit itself where the noise's
+    spread stays below it (noise-free data, whose true pose fits far within it)."""
     fit = noise_fit(noise)
     if fit + within * fit_standard_error(fit, points) <= limit:
         return float(limit)

@@ -27,22 +27,40 @@ def session_evidence(recognizer, touches: Touches, misses, ranked, keep):
     if not ranked or not keep:
         return None
     by_name = {e.name: e.model for e in recognizer.models}
-    features = touches.features
-    x = np.concatenate([touches.records[i].points for i in keep])
-    curves = [len(c) for i in keep for c in features[i].curves]
-    points, use = [r.points for r in touches.records], np.isin(np.arange(len(touches)), keep)
-    signed = [residuals(joint_model(by_name[h.model], points, touches.tips, h.scale, use), h.rotation,
+    features, records = touches.features, touches.records
+    # the touches of single contacts are one touch, as they are one search (:meth:`.add.Add._pooled`): after the others
+    contacts = [i for i in keep if records[i].world.contacts is not None]
+    order = [i for i in keep if i not in contacts] + contacts
+    x = np.concatenate([records[i].points for i in order])
+    curves = [len(c) for i in order for c in features[i].curves]
+    points = [records[i].points for i in order]
+    signed = [residuals(joint_model(by_name[h.model], points, touches.tips[order], h.scale), h.rotation,
                         h.translation, x, h.scale) for h in ranked]
     lines = None
     if misses:
-        step = 0.5 * float(np.median([touches.records[i].world.spacing for i in keep]))
+        step = 0.5 * float(np.median([records[i].world.spacing for i in keep]))
         lines = miss_excess(by_name, ranked, misses, step=step, limit=touches.limit(keep))
     floor = touches.floor
+    parts = [features[i] for i in order if i not in contacts]
+    sizes = [len(f.curves) for f in parts]
+    if contacts:
+        parts.append(_pooled(records, contacts))
+        sizes.append(sum(len(features[i].curves) for i in contacts))
     return evidence([h.model for h in ranked], signed, curves, float(np.median([f.noise for f in features])),
-                    limits=[fit_limit(features[i], floor) for i in keep],
-                    touches=[len(features[i].curves) for i in keep], misses=lines,
-                    resolution=min(resolution(features[i], floor) for i in keep),
-                    radii=[features[i].radius for i in keep])
+                    limits=[fit_limit(f, floor) for f in parts], touches=sizes, misses=lines,
+                    resolution=min(resolution(f, floor) for f in parts), radii=[f.radius for f in parts])
+
+
+def _pooled(records, indices):
+    """The :class:`~tactrec.features.Touch` of the contacts of the touches ``indices`` together (world frame)."""
+    from ..features import Touch
+    from ..io.touch import TactileData
+
+    pooled = records[indices[0]].world.contacts
+    for i in indices[1:]:
+        pooled = pooled.joined(records[i].world.contacts)
+    first = records[indices[0]].world
+    return Touch.from_data(TactileData.from_contacts(pooled, units=first.units, source=first.source))
 
 
 class JointFit:
