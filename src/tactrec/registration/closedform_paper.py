@@ -62,17 +62,21 @@ class Superposition:
         self.local = np.asarray(local, dtype=np.float64)
         self.radius = float(np.sqrt(np.mean(np.sum(self.local[:, :2] ** 2, axis=1)))) or 1.0
 
-    def _rotated(self, phi):
+    def _rotated(self, phi, turning: bool = True):
+        """The data turned by ``phi (m,)`` ``(m, n, 3)`` and (``turning``; else None) its derivative in phi."""
         c, s = np.cos(phi)[:, None], np.sin(phi)[:, None]
         x, y, z = self.local[:, 0], self.local[:, 1], self.local[:, 2]
         w = np.stack([c * x - s * y, s * x + c * y, np.broadcast_to(z, c.shape[:1] + z.shape)], axis=-1)
+        if not turning:
+            return w, None
         w_phi = np.stack([-s * x - c * y, c * x - s * y, np.zeros(c.shape[:1] + z.shape)], axis=-1)
         return w, w_phi
 
-    def transform(self, uv: np.ndarray, phi: np.ndarray):
-        """Model-frame points ``(m, n, 3)`` for parameters ``uv (m, 2)``, ``phi (m,)``."""
+    def transform(self, uv: np.ndarray, phi: np.ndarray, turning: bool = True):
+        """Model-frame points ``(m, n, 3)`` for parameters ``uv (m, 2)``, ``phi (m,)``, the surface's
+        frame jet and the turned data with (``turning``) its derivative in phi."""
         jet = self.model.frame_jet(uv[:, 0], uv[:, 1])
-        w, w_phi = self._rotated(phi)
+        w, w_phi = self._rotated(phi, turning)
         X = _apply(jet.frame, w) + jet.point[:, None, :]
         return X, jet, w, w_phi
 
@@ -84,7 +88,7 @@ class Superposition:
         """E of eq. (11), shape ``(m,)``; ``inf`` at singular parameter points."""
         out = np.empty(len(phi))
         for sl in self._chunks(len(phi)):
-            X, jet, _, _ = self.transform(uv[sl], phi[sl])
+            X, jet, _, _ = self.transform(uv[sl], phi[sl], turning=False)
             fg = self.model.implicit(X, order=1)
             with np.errstate(all="ignore"):
                 g = np.abs(fg[..., 0]) / np.linalg.norm(fg[..., 1:], axis=-1)
@@ -92,9 +96,10 @@ class Superposition:
             out[sl] = np.where(jet.regular & np.isfinite(e), e, np.inf)
         return out
 
-    def energy_grad(self, uv: np.ndarray, phi: np.ndarray):
+    def energy_grad(self, uv: np.ndarray, phi: np.ndarray, turn_only: bool = False):
         """E ``(m,)``, its gradient ``(m, 3)`` in (u, v, phi) and the metric
-        scales ``(m, 3)`` (``|sigma_u|, |sigma_v|``, data radius)."""
+        scales ``(m, 3)`` (``|sigma_u|, |sigma_v|``, data radius); ``turn_only``: the gradient in phi
+        alone (the others 0), as :meth:`initial_phi`'s bisection reads it."""
         m = len(phi)
         E = np.empty(m)
         G = np.empty((m, 3))
@@ -113,15 +118,18 @@ class Superposition:
                 dg = np.stack([gx / gn - c * (hxx * gx + hxy * gy + hxz * gz),
                                gy / gn - c * (hxy * gx + hyy * gy + hyz * gz),
                                gz / gn - c * (hxz * gx + hyz * gy + hzz * gz)], axis=-1) * sign[..., None]
-            dX_du = _apply(jet.frame_u, w) + jet.su[:, None, :]
-            dX_dv = _apply(jet.frame_v, w) + jet.sv[:, None, :]
-            dX_dphi = _apply(jet.frame, w_phi)
             n_inv = 1.0 / len(self.local)
-            grads = [np.einsum("mni,mni->m", dg, d) * n_inv for d in (dX_du, dX_dv, dX_dphi)]
+            turn = np.einsum("mni,mni->m", dg, _apply(jet.frame, w_phi)) * n_inv
             e = np.abs(g).mean(axis=1)
             ok = jet.regular & np.isfinite(e)
             E[sl] = np.where(ok, e, np.inf)
-            G[sl] = np.where(ok[:, None], np.stack(grads, axis=1), 0.0)
+            if turn_only:
+                G[sl, :2] = 0.0
+                G[sl, 2] = np.where(ok, turn, 0.0)
+            else:
+                grads = [np.einsum("mni,mni->m", dg, _apply(jet.frame_u, w) + jet.su[:, None, :]) * n_inv,
+                         np.einsum("mni,mni->m", dg, _apply(jet.frame_v, w) + jet.sv[:, None, :]) * n_inv, turn]
+                G[sl] = np.where(ok[:, None], np.stack(grads, axis=1), 0.0)
             S[sl, 0] = np.linalg.norm(jet.su, axis=-1)
             S[sl, 1] = np.linalg.norm(jet.sv, axis=-1)
             S[sl, 2] = self.radius
@@ -146,7 +154,7 @@ class Superposition:
         uv_b = uv[ci]
         for _ in range(bisections):
             mid = 0.5 * (lo + hi)
-            _, G, _ = self.energy_grad(uv_b, mid)
+            _, G, _ = self.energy_grad(uv_b, mid, turn_only=True)
             up = G[:, 2] > 0
             hi = np.where(up, mid, hi)
             lo = np.where(up, lo, mid)
