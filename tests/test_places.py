@@ -14,9 +14,8 @@ from tactrec.surfaces.mesh import MeshModel
 
 
 def _model(tm, name):
-    model = MeshModel(np.asarray(tm.vertices), np.asarray(tm.faces), name=name)
-    mesh_fast.prepare(model)
-    return model
+    """The mesh ``tm`` as a model (its fields are built when a test first reads them)."""
+    return MeshModel(np.asarray(tm.vertices), np.asarray(tm.faces), name=name)
 
 
 @pytest.fixture(scope="module")
