@@ -78,15 +78,17 @@ def cmd_bench(args) -> int:
         extra["scans"] = args.scans
     if args.sets is not None:
         from .bench.calibration import SETS as CALIBRATION_SETS
+        from .bench.contacts import SETS as CONTACT_SETS
         from .bench.multi_touch import SETS as SESSION_SETS
         from .bench.open_world import EXTRA_SETS, SCAN_SETS
         from .bench.patch import SETS as PATCH_SETS
         from .bench.sensor import SCAN_SETS as SENSOR_SETS
 
         known = {"calibration": CALIBRATION_SETS, "multi-touch": SESSION_SETS, "open-world": SCAN_SETS + EXTRA_SETS,
-                 "sensor": SENSOR_SETS, "patch": PATCH_SETS}.get(args.name)
+                 "sensor": SENSOR_SETS, "patch": PATCH_SETS, "contacts": CONTACT_SETS}.get(args.name)
         if known is None:
-            raise InputError("--sets applies to calibration, multi-touch, open-world, sensor and patch only", args.name)
+            raise InputError("--sets applies to calibration, multi-touch, open-world, sensor, patch and contacts only",
+                             args.name)
         extra["sets"] = _known(args.sets, known, "set", "--sets", args.name)
     if args.strategies is not None:
         from .bench.multi_touch import STRATEGIES

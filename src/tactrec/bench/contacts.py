@@ -1,6 +1,8 @@
 """Sessions of single contacts, as a probe or a force/torque sensor records them (``tactrec bench contacts``).
 
-Each session touches one of the ten ``paper-fig11`` scans at :data:`CONTACTS`
+Each session touches one scan of a set (:data:`SETS`: the ten ``paper-fig11``
+scans; ``other``, the free-form meshes of other sources,
+:mod:`.other_scans`, each recognised among its set) at :data:`CONTACTS`
 places uniform over its area (:func:`tactrec.simulation.simulate_contacts`),
 each a point with Gaussian noise of ``noise`` mm per coordinate and an
 outward normal tilted by ``normal_sd`` degrees per direction, both stated in
@@ -29,7 +31,10 @@ from .common import CORE_SOURCES, database, instance_rng, recognizer, run_parall
     write_json
 from .sensor import _quantiles
 
-__all__ = ["run", "CONTACTS", "NOISE", "NORMAL_SD", "SURE", "TARGET"]
+__all__ = ["run", "SETS", "CONTACTS", "NOISE", "NORMAL_SD", "SURE", "TARGET"]
+
+#: the sets of scans sessions may touch (``--sets``); the first is the default
+SETS = ("fig11", "other")
 
 #: contacts a session adds at most
 CONTACTS = 12
@@ -43,24 +48,25 @@ TARGET = 95.0
 
 
 def _code_hash() -> str:
-    return sources_hash(*CORE_SOURCES, "simulation.py", "engine/contacts.py", "io/contacts.py", "session/add.py",
+    return sources_hash(*CORE_SOURCES, "simulation.py", "engine/contacts.py", "io/contacts.py", "session",
                         "bench/contacts.py")
 
 
-def _names() -> tuple[str, ...]:
+def _names(scans: str = SETS[0]) -> tuple[str, ...]:
     from ..surfaces import BUILTIN_SETS
+    from .other_scans import OTHER
 
-    return BUILTIN_SETS["paper-fig11"]
+    return tuple(BUILTIN_SETS["paper-fig11"]) if scans == "fig11" else OTHER
 
 
 def _session(task) -> dict:
-    """One session of ``task = (scan index, instance, seed, noise, normal_sd)``."""
+    """One session of ``task = (scan index, instance, seed, noise, normal_sd, set)``."""
     from ..io.contacts import Contacts
     from ..io.touch import TactileData
     from ..simulation import simulate_contacts
 
-    m, i, seed, noise, normal_sd = task
-    names = _names()
+    m, i, seed, noise, normal_sd, scans = task
+    names = _names(scans)
     db = database(names)
     entry = db.entries[m]
     rng = instance_rng(seed, m, i)
@@ -105,28 +111,32 @@ def _summary(records: list[dict]) -> dict:
 
 
 def run(*, out, instances: int = 10, seed: int = 0, jobs: int | None = None, quiet: bool = False,
-        **_ignored) -> dict:
-    """Run ``instances`` sessions per scan; write ``contacts.json`` and ``contacts.md``."""
+        sets=SETS[:1], **_ignored) -> dict:
+    """Run ``instances`` sessions per scan of each of ``sets``; write ``contacts.json`` and ``contacts.md``."""
     out = Path(out)
-    folder = out / "contacts.parts" / _code_hash()
-    folder.mkdir(parents=True, exist_ok=True)
-    tasks = [(m, i, seed, NOISE, NORMAL_SD) for i in range(instances) for m in range(len(_names()))]
-    records = run_parallel(_saved, [(t, folder) for t in tasks], jobs=jobs or 1, quiet=quiet, desc="contacts")
-    summary = _summary(records)
+    per_set = {}
+    for scans in sets:
+        folder = out / "contacts.parts" / scans / _code_hash()
+        folder.mkdir(parents=True, exist_ok=True)
+        tasks = [(m, i, seed, NOISE, NORMAL_SD, scans) for i in range(instances) for m in range(len(_names(scans)))]
+        records = run_parallel(_saved, [(t, folder) for t in tasks], jobs=jobs or 1, quiet=quiet,
+                               desc=f"contacts {scans}")
+        per_set[scans] = {"summary": _summary(records), "records": records}
     table = {"benchmark": "contacts", "method": "fast", "instances": instances, "seed": seed, "noise": NOISE,
-             "normal_sd": NORMAL_SD, "contacts": CONTACTS, "target": TARGET, "summary": summary, "records": records}
+             "normal_sd": NORMAL_SD, "contacts": CONTACTS, "target": TARGET, "sets": per_set}
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / "contacts.json", table)
-    s = summary
-    q = "-" if s["add_seconds"] is None else "/".join(f"{x:.2f}" for x in s["add_seconds"])
-    median = "-" if s["median_contacts"] is None else f"{s['median_contacts']:g}"
+    rows = []
+    for scans, found in per_set.items():
+        s = found["summary"]
+        q = "-" if s["add_seconds"] is None else "/".join(f"{x:.2f}" for x in s["add_seconds"])
+        median = "-" if s["median_contacts"] is None else f"{s['median_contacts']:g}"
+        rows.append(f"| {scans} | {s['sessions']} | {s['right_sure']} ({s['right_sure_percent']:.0f}%; target "
+                    f"{TARGET:g}%) | {median} | {s['sure_wrong_answers']} | {q} |")
     table["text"] = "\n".join([
-        f"{s['sessions']} sessions on the ten paper-fig11 scans, up to {CONTACTS} contacts each at random places; "
+        f"Sessions of up to {CONTACTS} contacts at random places, each scan recognised among its set; "
         f"point noise {NOISE} mm, normals {NORMAL_SD} degrees, seed {seed}.", "",
-        "| sessions | right at >= 0.95 within 12 (and after) | median contacts to it | sure and wrong answers | "
-        "s an add (median/p95/max) |", "|---|---|---|---|---|",
-        f"| {s['sessions']} | {s['right_sure']} ({s['right_sure_percent']:.0f}%; target {TARGET:g}%) | "
-        f"{median} | "
-        f"{s['sure_wrong_answers']} | {q} |"])
+        "| set | sessions | right at >= 0.95 within 12 (and after) | median contacts to it | sure and wrong answers | "
+        "s an add (median/p95/max) |", "|---|---|---|---|---|---|", *rows])
     write_text_atomic(out / "contacts.md", table["text"])
     return table
