@@ -146,14 +146,20 @@ def _angle(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     return np.degrees(np.arccos(np.clip(np.sum(u * v, axis=-1), -1.0, 1.0)))
 
 
-def _pairs(P, N, length: float, tol: float, na, nb):
-    """The ordered pairs of distinct places ``(v, w)`` as far apart as ``length`` (within ``tol``) whose
-    normals make the angles the contacts' normals make with the chord between them and with each
-    other: ``na``, ``nb`` (each None or ``(normal, angle to the chord, allowance in degrees)``).
-    Returns ``v (q,), w (q,)``."""
+def _distances(P: np.ndarray) -> np.ndarray:
+    """The distances between the places ``P (p, 3)``, ``(p, p)`` (element-wise: no BLAS)."""
+    return np.concatenate([np.linalg.norm(P[start:start + 256, None] - P[None], axis=2)
+                           for start in range(0, len(P), 256)])
+
+
+def _pairs(P, N, D, length: float, tol: float, na, nb):
+    """The ordered pairs of distinct places ``(v, w)`` as far apart as ``length`` (within ``tol``; ``D``,
+    their distances, :func:`_distances`) whose normals make the angles the contacts' normals make
+    with the chord between them and with each other: ``na``, ``nb`` (each None or ``(normal, angle to
+    the chord, allowance in degrees)``).  Returns ``v (q,), w (q,)``."""
     vs, ws = [], []
     for start in range(0, len(P), 256):
-        d = np.linalg.norm(P[start:start + 256, None] - P[None], axis=2)
+        d = D[start:start + 256]
         v, w = np.nonzero((np.abs(d - length) <= tol) & (d > 0))
         v = v + start
         if len(v) and (na is not None or nb is not None):
@@ -181,11 +187,11 @@ def _frames(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
     return np.stack([e1, np.cross(e3, e1), e3], axis=-1)
 
 
-def _triangle_poses(P, N, x, normals, sd, tri, tol):
+def _triangle_poses(P, N, D, x, normals, sd, tri, tol):
     """Every pose putting the contacts ``tri = (a, b, c)`` of ``x`` on a triangle of places with the same
-    sides (within ``tol``) and normals alike (:func:`_pairs`), in parts of about :data:`CHUNK` poses
-    (so that a model whose places hold millions of such triangles is screened in bounded memory):
-    yields ``R (h, 3, 3), t (h, 3)``."""
+    sides (within ``tol``; ``D``, the places' distances) and normals alike (:func:`_pairs`), in parts of
+    about :data:`CHUNK` poses (so that a model whose places hold millions of such triangles is screened
+    in bounded memory): yields ``R (h, 3, 3), t (h, 3)``."""
     a, b, c = tri
 
     def side(i, j):
@@ -193,7 +199,7 @@ def _triangle_poses(P, N, x, normals, sd, tri, tol):
         u = (x[j] - x[i]) / length
         ends = [None if not (np.isfinite(normals[k, 0]) and np.isfinite(sd[k])) else
                 (normals[k], float(_angle(normals[k], u)), ANGLE * float(sd[k])) for k in (i, j)]
-        return _pairs(P, N, length, tol, *ends)
+        return _pairs(P, N, D, length, tol, *ends)
 
     v1, w1 = side(a, b)
     v2, w2 = side(a, c)
@@ -264,11 +270,12 @@ def contact_stage(held, indices, touch, limit: float, fit: float) -> list[Regist
         xa = np.ascontiguousarray(tangent_points(x, c.normals, c.normal_sd, fit * scale))
         limit_model = limit * scale
         P, N, reach = _places(model)
+        D = _distances(P)                               # every side of every triangle reads them
         tol = 2.0 * reach + SIGMAS * np.sqrt(2.0) * touch.noise * scale
         field, tried, found = model.distance_field, 0, None
         for tri in triangles(x, TRIANGLES):
             R, t, score = np.zeros((0, 3, 3)), np.zeros((0, 3)), np.zeros(0)
-            for Rc, tc in _triangle_poses(P, N, x, c.normals, c.normal_sd, tri, tol):
+            for Rc, tc in _triangle_poses(P, N, D, x, c.normals, c.normal_sd, tri, tol):
                 tried += len(Rc)
                 sc, _ = field_best(*field.args(), np.ascontiguousarray(Rc), np.ascontiguousarray(tc), xa[None])
                 R, t, score = np.concatenate([R, Rc]), np.concatenate([t, tc]), np.concatenate([score, sc])
