@@ -15,7 +15,7 @@ import math
 
 import numpy as np
 
-__all__ = ["transform", "rotate", "compose", "solve_spd", "gram", "stable_order", "stable_prefix", "clearly_less",
+__all__ = ["transform", "rotate", "tangents", "compose", "solve_spd", "gram", "stable_order", "stable_prefix", "clearly_less",
            "QUANTUM", "dot3", "norm3", "det3", "times", "eigh", "eigvalsh", "lstsq", "inverse_spd", "RANK_TOL"]
 
 #: relative size of the score bands within which :func:`stable_order` breaks ties by index
@@ -156,6 +156,14 @@ def transform(R: np.ndarray, t: np.ndarray, x: np.ndarray) -> np.ndarray:
     Rh = R[:, None]                                                       # (h, 1, 3, 3)
     return (Rh[..., 0] * x[None, :, 0, None] + Rh[..., 1] * x[None, :, 1, None]
             + Rh[..., 2] * x[None, :, 2, None] + t[:, None, :])
+
+
+def tangents(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit directions ``(n, 3)`` across each of the unit ``normals (n, 3)``, at right angles to each
+    other: the first across the normal and its smallest axis, the second across both (no BLAS)."""
+    d1 = np.cross(normals, np.eye(3)[np.argmin(np.abs(normals), axis=1)])
+    d1 /= np.linalg.norm(d1, axis=1, keepdims=True)
+    return d1, np.cross(normals, d1)
 
 
 def compose(A: np.ndarray, B: np.ndarray) -> np.ndarray:

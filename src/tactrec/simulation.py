@@ -20,7 +20,7 @@ from scipy.spatial.transform import Rotation
 
 from .errors import InputError
 from .io.touch import TactileData
-from .linalg import compose, dot3, rotate, times
+from .linalg import compose, dot3, rotate, tangents, times
 from .sensor import Imperfections, record
 from .surfaces.base import SurfaceModel
 
@@ -321,9 +321,7 @@ def simulate_contacts(model: SurfaceModel, count: int, *, noise: float = 0.0, no
     seen = points + rng.normal(0.0, noise, size=points.shape) if noise > 0 else points
     tilt = normals.copy()
     if normal_sd > 0:
-        d1 = np.cross(normals, np.eye(3)[np.argmin(np.abs(normals), axis=1)])
-        d1 /= np.linalg.norm(d1, axis=1, keepdims=True)
-        d2 = np.cross(normals, d1)
+        d1, d2 = tangents(normals)
         a, b = (np.tan(np.deg2rad(rng.normal(0.0, normal_sd, size=count)))[:, None] for _ in range(2))
         tilt = normals + a * d1 + b * d2
         tilt /= np.linalg.norm(tilt, axis=1, keepdims=True)

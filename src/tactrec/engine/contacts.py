@@ -55,7 +55,7 @@ import math
 
 import numpy as np
 
-from ..linalg import rotate, stable_order, transform
+from ..linalg import rotate, stable_order, tangents, transform
 from ..registration.result import Outcome, Registration
 
 __all__ = ["contact_stage", "tangent_points", "triangles", "PLACES", "DENSE", "FIELD_KEEP", "FIELD_STEPS", "KEEP",
@@ -89,16 +89,11 @@ def tangent_points(x: np.ndarray, normals: np.ndarray, sd: np.ndarray, fit: floa
     points on its tangent plane, ``+-s`` along two directions across the normal, ``s = fit /
     radians(sd)``: a tilt of one standard deviation lifts them by ``fit`` (data units, the touch's fit
     limit), what a point's noise moves it by.  ``(n + 4 k, 3)``, the contacts first."""
-    out = [x]
-    for p, n, a in zip(x, normals, sd):
-        if not (np.isfinite(n[0]) and np.isfinite(a) and a > 0 and fit > 0):
-            continue
-        d1 = np.cross(n, np.eye(3)[int(np.argmin(np.abs(n)))])
-        d1 = d1 / np.linalg.norm(d1)
-        d2 = np.cross(n, d1)
-        s = float(fit) / math.radians(float(a))
-        out.append(np.array([p + s * d1, p - s * d1, p + s * d2, p - s * d2]))
-    return np.concatenate(out)
+    use = np.isfinite(normals[:, 0]) & np.isfinite(sd) & (sd > 0) if fit > 0 else np.zeros(len(x), dtype=bool)
+    d1, d2 = tangents(normals[use])
+    s = (float(fit) / np.radians(sd[use]))[:, None]
+    p = x[use]
+    return np.concatenate([x, np.stack([p + s * d1, p - s * d1, p + s * d2, p - s * d2], axis=1).reshape(-1, 3)])
 
 
 def triangles(points: np.ndarray, count: int) -> list[tuple[int, int, int]]:
@@ -229,20 +224,20 @@ def _triangle_poses(P, N, D, x, normals, sd, tri, tol):
             yield R, P[va] - np.einsum("hij,j->hi", R, x[a])
 
 
-def _agree(model, R, t, x, normals, sd) -> np.ndarray:
-    """Whether each pose's model normals agree with the contacts' ``(h,)``: the sum over the contacts
-    with a stated uncertainty of their squared angles to the model's normals in units of it is a
-    chi-square of two degrees of freedom a contact when the pose is the truth; a pose agrees when
-    that sum lies within the quantile :data:`SIGMAS` standard normal deviations out (the fit test's
-    allowance).  A normal without its uncertainty tests nothing."""
+def _agree(R, surface, normals, sd) -> np.ndarray:
+    """Whether each pose ``R (h, 3, 3)``'s model normals ``surface (h, n, 3)`` (at the posed contacts)
+    agree with the contacts' ``normals (n, 3)`` ``(h,)``: the sum over the contacts with a stated
+    uncertainty of their squared angles to the model's normals in units of it is a chi-square of two
+    degrees of freedom a contact when the pose is the truth; a pose agrees when that sum lies within
+    the quantile :data:`SIGMAS` standard normal deviations out (the fit test's allowance).  A normal
+    without its uncertainty tests nothing."""
     from scipy.stats import chi2, norm
 
     test = np.isfinite(sd) & np.isfinite(normals[:, 0])
     if not test.any():
         return np.ones(len(R), dtype=bool)
-    _, n = model.planes(transform(R, t, x[test]))
     turned = np.einsum("hij,kj->hki", R, normals[test])
-    total = np.sum((_angle(turned, n) / sd[test]) ** 2, axis=1)
+    total = np.sum((_angle(turned, surface[:, test]) / sd[test]) ** 2, axis=1)
     return total <= chi2.isf(norm.sf(SIGMAS), 2 * int(test.sum()))
 
 
@@ -287,8 +282,9 @@ def contact_stage(held, indices, touch, limit: float, fit: float) -> list[Regist
                                        FIELD_STEPS)
             best = stable_order(score)[:KEEP]
             refined = solve(model, R[best], t[best], xa, Criteria(STEPS))
-            error = np.abs(model.planes(transform(refined.R, refined.t, x))[0]).mean(axis=1)   # the contacts'
-            agree = _agree(model, refined.R, refined.t, x, c.normals, c.normal_sd)
+            distance, surface = model.planes(transform(refined.R, refined.t, x))           # the contacts' own
+            error = np.abs(distance).mean(axis=1)
+            agree = _agree(refined.R, surface, c.normals, c.normal_sd)
             if agree.any():
                 least = float(error[agree].min())
                 if found is None or least < found[3]:
