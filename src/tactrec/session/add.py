@@ -118,10 +118,7 @@ class Add:
         from ..io.contacts import spread_problem
         from ..io.touch import TactileData
 
-        pooled = None
-        for i, r in enumerate(self.touches.records):                  # in the order they were added
-            if i not in slipped and r.world.contacts is not None:
-                pooled = r.world.contacts if pooled is None else pooled.joined(r.world.contacts)
+        pooled = self.touches.joined_contacts([i for i in range(len(self.touches)) if i not in slipped])
         pooled = world.contacts if pooled is None else pooled.joined(world.contacts)
         own = Touch.from_data(world)
         problem = spread_problem(pooled)

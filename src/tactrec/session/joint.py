@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..features import Touch
+from ..io.touch import TactileData
 from ..linalg import clearly_less
 from ..missed import miss_excess
 from ..probability import evidence, fit_limit, residuals, resolution
@@ -44,23 +46,13 @@ def session_evidence(recognizer, touches: Touches, misses, ranked, keep):
     parts = [features[i] for i in order if i not in contacts]
     sizes = [len(f.curves) for f in parts]
     if contacts:
-        parts.append(_pooled(records, contacts))
+        first = records[contacts[0]].world
+        parts.append(Touch.from_data(TactileData.from_contacts(touches.joined_contacts(contacts), units=first.units,
+                                                               source=first.source)))
         sizes.append(sum(len(features[i].curves) for i in contacts))
     return evidence([h.model for h in ranked], signed, curves, float(np.median([f.noise for f in features])),
                     limits=[fit_limit(f, floor) for f in parts], touches=sizes, misses=lines,
                     resolution=min(resolution(f, floor) for f in parts), radii=[f.radius for f in parts])
-
-
-def _pooled(records, indices):
-    """The :class:`~tactrec.features.Touch` of the contacts of the touches ``indices`` together (world frame)."""
-    from ..features import Touch
-    from ..io.touch import TactileData
-
-    pooled = records[indices[0]].world.contacts
-    for i in indices[1:]:
-        pooled = pooled.joined(records[i].world.contacts)
-    first = records[indices[0]].world
-    return Touch.from_data(TactileData.from_contacts(pooled, units=first.units, source=first.source))
 
 
 class JointFit:

@@ -47,6 +47,16 @@ class Touches:
         return np.array([r.world.contact if r.world.contact is not None else r.features.geometry.contact
                          for r in self.records])
 
+    def joined_contacts(self, touches):
+        """The single contacts of the touches ``touches`` (indices) of contacts, in that order, as one
+        :class:`~tactrec.io.contacts.Contacts` (world frame); None where none of them is one."""
+        pooled = None
+        for i in touches:
+            c = self.records[i].world.contacts
+            if c is not None:
+                pooled = c if pooled is None else pooled.joined(c)
+        return pooled
+
     def points(self, touches) -> np.ndarray:
         """How many points each of the touches ``touches`` (indices) has: ``(k,)``."""
         return np.array([len(self.records[i].points) for i in touches], dtype=np.float64)
