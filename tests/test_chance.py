@@ -89,6 +89,33 @@ def test_stored_with_the_database_and_read_back(tmp_path, fitted):
         assert r.chance is loaded.chance
 
 
+def test_each_kind_of_touch_is_weighed_against_its_own_calibration_touches(tmp_path, fitted):
+    """Calibration touches of another kind whose known and left-out fits look alike (chance fits
+    everywhere) leave the curves' ratios as they were and give touches of their kind no evidence
+    either way; a kind with too few calibration touches (here patches, before they are added) is
+    weighed against all of them; the kinds are stored with the statistics and kept by ``without``."""
+    _, model = fitted
+    n = len(model)
+    alike = np.column_stack([np.linspace(-1.5, 1.5, n), np.linspace(-1.0, 2.0, n)])
+    mixed = dataclasses.replace(model, resolving=np.concatenate([model.resolving, model.resolving]),
+                                known=np.vstack([model.known, alike]), unknown=np.vstack([model.unknown, alike]),
+                                touched=model.touched * 2, kinds=("curves",) * n + ("patch",) * n,
+                                fitted_penalty=model.penalty)
+    for r in model.resolving[::5]:
+        for x1, lead in ((-1.0, 1.5), (0.0, 0.5), (1.0, 0.0)):
+            x2 = min(x1 + lead, 2.0)
+            assert mixed.ratio(x1, x2, r) == pytest.approx(model.ratio(x1, x2, r), rel=1e-12)
+            assert model.ratio(x1, x2, r, kind="patch") == model.ratio(x1, x2, r)      # too few patches: all
+            assert 0.5 < mixed.ratio(x1, x2, r, kind="patch") < 2.0
+    save(mixed, tmp_path)
+    back = load(tmp_path)
+    assert back.kind_of == mixed.kind_of and back.pool("patch").tolist() == list(range(n, 2 * n))
+    left = back.without([MODELS[0]])
+    assert MODELS[0] not in left.touched and len(left.kind_of) == len(left)
+    assert [k for k, t in zip(left.kind_of, left.touched) if t == MODELS[1]] == \
+        [k for k, t in zip(mixed.kind_of, mixed.touched) if t == MODELS[1]]
+
+
 def test_a_null_model_of_other_models_is_not_used(tmp_path, fitted):
     db, model = fitted
     build_database(MODELS[:3], tmp_path / "db", quiet=True)
@@ -104,7 +131,10 @@ def test_a_null_model_of_other_models_is_not_used(tmp_path, fitted):
                                   '"key": "k", "method": "fast", "seed": 1e400, "touches": 2, "resolving": [], '
                                   '"known": [], "unknown": [], "touched": []}', '{"format": "tactrec-chance", '
                                   '"version": 1, "key": "k", "method": "fast", "seed": 0, "touches": 2, "resolving": '
-                                  '[1.0], "known": [[0, 1]], "unknown": [[1, 1]], "touched": ["a"], "penalty": "0.1"}'])
+                                  '[1.0], "known": [[0, 1]], "unknown": [[1, 1]], "touched": ["a"], "penalty": "0.1"}',
+                                  '{"format": "tactrec-chance", "version": 1, "key": "k", "method": "fast", "seed": 0, '
+                                  '"touches": 2, "resolving": [1.0], "known": [[0, 1]], "unknown": [[1, 1]], '
+                                  '"touched": ["a"], "kinds": ["gel"]}'])
 def test_a_damaged_null_model_is_named_set_aside_and_calibrated_again(tmp_path, capsys, text):
     """Read directly, a damaged null model is an error naming its file; a database holding one says so
     in one warning line and scores by the fit test alone; ``tactrec calibrate`` writes it again."""

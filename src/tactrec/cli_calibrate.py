@@ -17,6 +17,17 @@ def _range(text: str) -> tuple[float, float]:
     return lo, hi
 
 
+def _kinds(text: str) -> tuple[str, ...]:
+    import argparse
+
+    from .chance import KINDS
+
+    kinds = tuple(k.strip() for k in text.split(","))
+    if not all(k in KINDS for k in kinds):
+        raise argparse.ArgumentTypeError(f"kinds among {','.join(KINDS)}, not {text!r}")
+    return kinds
+
+
 def add_calibrate_parser(sub, *, count, methods, default_method):
     p = sub.add_parser("calibrate", help="fit a database's null model of chance fits: how often a touch fits a "
                        "model it did not touch (stored with the database; run again when its models change)")
@@ -28,6 +39,9 @@ def add_calibrate_parser(sub, *, count, methods, default_method):
                    "ones over the lower half, the clean ones over the upper")
     p.add_argument("--noise", type=_range, default=None, metavar="MIN,MAX",
                    help="the small touches' noise sigma, the models' units (default 0.01,0.08)")
+    p.add_argument("--kinds", type=_kinds, default=("curves", "patch"), metavar="KIND[,KIND]",
+                   help="the kinds of calibration touch, each weighed against its own (curves, patch, contacts; "
+                   "default curves,patch: contacts take about a minute a model)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--method", choices=sorted(methods), default=default_method,
                    help=f"the method whose fits are calibrated (default {default_method})")
@@ -47,14 +61,15 @@ def cmd_calibrate(args) -> int:
 
     db = load_database(args.db, warn=lambda line: None)
     touches = args.touches or TOUCHES
-    bar = tqdm(total=touches * len(db), desc="calibrating", unit="touch", file=sys.stderr,
+    bar = tqdm(total=touches * len(db) * len(args.kinds), desc="calibrating", unit="touch", file=sys.stderr,
                disable=args.quiet or not sys.stderr.isatty(), leave=False)
     with Recognizer(db.entries, method=args.method, workers=default_workers()) as recognizer:
         model = calibrate(recognizer, touches=touches, seed=args.seed, lengths=args.lengths or LENGTHS,
-                          noise=args.noise or NOISE, progress=lambda name: bar.update())
+                          noise=args.noise or NOISE, kinds=args.kinds, progress=lambda name: bar.update())
     bar.close()
     path = save(model, args.db)
     if not args.quiet:
-        print(f"{path}: {len(model)} touches of {len(db)} models (seed {args.seed}); the regression's prior "
+        print(f"{path}: {len(model)} touches ({', '.join(args.kinds)}) of {len(db)} models (seed {args.seed}); "
+              f"the regression's prior "
               f"precision {model.penalty:g}, chosen by cross-validation over the models")
     return 0

@@ -51,14 +51,10 @@ must not cut into the surface (:mod:`tactrec.missed`).
 The resolution.  A sensor, a scan's facets and the search's own steps all
 resolve distances down to some size, and below it two fits are equal: a
 point's distance below :func:`resolution` (``floor`` x the touch's radius,
-what a fit of noise-free data may leave) is read as that, in the shares.  On
-noise-free data the noise estimate is zero, and without this two fits of
-1e-15 and 3e-15 mm (a CAD part's flat face and another's) read as the
-strongest evidence: on the CAD parts' P3 touches of ``tactrec bench
-fast-vs-paper`` 22 answers were sure (>= 0.95) and wrong so, 1 now.  A fit
-whose points lie beyond the resolution still loses to one within it, and
-noisy data, whose distances lie mostly beyond it, are read nearly as they
-are.
+what a fit of noise-free data may leave) is read as that, in the shares.
+Without it two fits of 1e-15 and 3e-15 mm (a CAD part's flat face and
+another's) read as the strongest evidence.  A fit whose points lie beyond
+the resolution still loses to one within it.
 
 An unsettled search.  A search that ended on its budget, its best beyond a plausible fit
 (:func:`plausible_fit`), has missed the true pose somewhere: its errors only bound each model's fit.
@@ -68,9 +64,8 @@ the models within the search's ``ratio`` of the best, which its next round would
 *tied* (:attr:`Evidence.tied`): read at the best's distances, in the shares and the fit test, sharing
 evenly.  The answer is still the lowest error; how sure it is falls with each model tied to it.
 
-Nothing comes from a simulation setting: the scatter is the touch's own.  The residuals are those of
-the points a touch kept: points off their curve's trace (:mod:`tactrec.outliers`) are no evidence for or
-against any model.  Models the search rejected or deferred have no probability; the accepted models'
+Nothing comes from a simulation setting: the scatter is the touch's own.  Points off their curve's trace
+(:mod:`tactrec.outliers`) are no evidence for or against any model.  Models the search rejected or deferred have no probability; the accepted models'
 probabilities and ``unknown``'s sum to one.  The replicates are drawn from a fixed seed and averaged
 without BLAS, so the same touch gives the same probabilities on every machine.  ``tactrec bench
 calibration`` and ``tactrec bench open-world`` measure how well the confidence matches the share of
@@ -267,6 +262,9 @@ class Evidence:
     tied : int
         How many of the models, best first, are read at the best's distances (module text, an
         unsettled search): 1 where the search settled.
+    kind : str
+        The touches' kind (``curves``, ``patch``, ``contacts``; ``mixed`` where a session's differ): the
+        null model of chance fits weighs it against its calibration touches of that kind.
     """
 
     models: tuple
@@ -280,6 +278,7 @@ class Evidence:
     resolution: float = 0.0
     radii: tuple = ()
     tied: int = 1
+    kind: str = "curves"
 
     @property
     def block(self) -> int:
@@ -366,7 +365,8 @@ class Evidence:
         out = {"models": list(self.models), "distances": np.round(self.distances, 7).tolist(),
                "curve_sizes": list(self.curve_sizes), "rho": self.rho, "noise": self.noise,
                "limits": [float(x) for x in self.limits], "touches": list(self.touches),
-               "resolution": float(self.resolution), "radii": [float(x) for x in self.radii], "tied": int(self.tied)}
+               "resolution": float(self.resolution), "radii": [float(x) for x in self.radii], "tied": int(self.tied),
+               "kind": self.kind}
         if self.misses is not None:
             out["misses"] = np.asarray(self.misses, dtype=np.float64).tolist()
         return out
@@ -382,19 +382,19 @@ class Evidence:
                    tuple(int(n) for n in d["curve_sizes"]), float(d["rho"]), float(d.get("noise", 0.0)),
                    tuple(float(x) for x in d.get("limits", ())), tuple(int(n) for n in d.get("touches", ())), misses,
                    float(d.get("resolution", 0.0)), tuple(float(x) for x in d.get("radii", ())),
-                   int(d.get("tied", 1)))
+                   int(d.get("tied", 1)), str(d.get("kind", "curves")))
 
 
 def evidence(models: Sequence[str], signed: Sequence[np.ndarray], curve_sizes: Sequence[int],
              noise: float = 0.0, *, limits: Sequence[float] = (), touches: Sequence[int] = (),
-             misses=None, resolution: float = 0.0, radii: Sequence[float] = (), tied: int = 1) -> Evidence:
+             misses=None, resolution: float = 0.0, radii: Sequence[float] = (), tied: int = 1,
+             kind: str = "curves") -> Evidence:
     """The :class:`Evidence` from each accepted model's signed residuals ``(m,)`` (best model first;
-    curves in order, ``curve_sizes`` points each; ``limits``, ``touches``, ``misses``,
-    ``resolution``, ``radii`` and ``tied`` as there)."""
+    curves in order, ``curve_sizes`` points each; the other arguments as its attributes)."""
     sizes = tuple(int(n) for n in curve_sizes)
     m = sum(sizes)
     rows = [np.abs(np.asarray(r, dtype=np.float64)) for r in signed]
     rho = lag_one(np.split(np.asarray(signed[0], dtype=np.float64), np.cumsum(sizes)[:-1])) if rows else 0.0
     return Evidence(tuple(models), np.array(rows).reshape(len(rows), m), sizes, float(rho), float(noise),
                     tuple(float(x) for x in limits), tuple(int(n) for n in touches), misses, float(resolution),
-                    tuple(float(x) for x in radii), max(1, min(int(tied), len(rows))))
+                    tuple(float(x) for x in radii), max(1, min(int(tied), len(rows))), str(kind))

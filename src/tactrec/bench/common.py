@@ -266,10 +266,10 @@ CORE_SOURCES = ("io", "estimation.py", "estimation_patch.py", "features.py", "li
                 "methods", "engine", "index", "compiled.py", "missed.py", "normal_scales.py", "units.py", "errors.py")
 
 
-def null_model(entries):
+def null_model(entries, kinds=("curves",)):
     """The null model of chance fits of the models ``entries`` (:mod:`tactrec.chance`): fitted once, with
-    ``ceil(160 / models)`` touches a model (at least 4, at most 32) from seed 0, and kept in the cache
-    folder under the models' key and the sources' hash."""
+    ``ceil(160 / models)`` touches a model (at least 4, at most 32) of each of ``kinds`` from seed 0, and
+    kept in the cache folder under the models' key, the kinds and the sources' hash."""
     import math
 
     from ..chance import catalogue_key, load, save
@@ -278,11 +278,12 @@ def null_model(entries):
     from ..recognition import Recognizer, default_workers
 
     key = catalogue_key(entries)
-    folder = cache_folder() / "chance" / f"{key[:20]}-{sources_hash(*CORE_SOURCES)}"
+    label = "" if tuple(kinds) == ("curves",) else "-" + "-".join(kinds)
+    folder = cache_folder() / "chance" / f"{key[:20]}-{sources_hash(*CORE_SOURCES)}{label}"
     found = load(folder, key)
     if found is None:
         with Recognizer(entries, workers=default_workers()) as r:
-            found = calibrate(r, touches=max(4, min(32, math.ceil(160 / len(entries)))), seed=0)
+            found = calibrate(r, touches=max(4, min(32, math.ceil(160 / len(entries)))), seed=0, kinds=kinds)
         folder.mkdir(parents=True, exist_ok=True)
         save(found, folder)
         found = load(folder, key)                  # as stored (rounded), whether fitted now or before

@@ -25,7 +25,8 @@ Reported per set and radius:
 * the recognition's seconds (median, p95, max);
 * how many wrong answers were sure (probability >= 0.95), and the expected
   calibration error over the known and unknown outcomes mixed one to one,
-  with the set's null model of chance fits (as ``open-world`` scores them).
+  with the set's null model of chance fits, calibrated on curves and patches
+  of its scans (:mod:`tactrec.chance.fit`).
 """
 
 from __future__ import annotations
@@ -188,7 +189,7 @@ def run(*, out, instances: int = 3, seed: int = 0, jobs: int | None = None, quie
     records = run_parallel(_saved, [(t, folder) for t in tasks], jobs=jobs or 1, quiet=quiet, desc="patch")
     summary = {}
     for scans in sets:
-        chance = null_model(_db(scans).entries)
+        chance = null_model(_db(scans).entries, kinds=("curves", "patch"))
         for r in radii:
             rows = [x for x in records if x["scans"] == scans and x["radius"] == float(r)]
             summary[f"{scans}/{r:g}"] = dict(_summary([x for x in rows if not x.get("no_place")], chance),

@@ -34,6 +34,12 @@ A touch more (less) resolving than every calibration touch is read with the most
 resolving of them.  :func:`tactrec.probability.open_world` turns the ratio into ``unknown``'s
 probability and the models'.
 
+Each kind of touch is weighed against calibration touches of its own kind (:data:`KINDS`): a patch
+of 400 points over a few millimetres, a curve of 61 points over centimetres and a handful of single
+contacts fit unrelated surfaces by chance at different rates for the same statistics.  Where the
+calibration holds fewer than :data:`NEAREST` touches of a touch's kind (a session of mixed kinds, a
+kind the catalogue was not calibrated for) it is weighed against all of them.
+
 The model is stored with the database (:data:`FILE`, plain JSON, keyed by the models' content:
 :func:`catalogue_key`) and fitted again when the models change (``tactrec calibrate``).
 """
@@ -53,7 +59,7 @@ from ..errors import InputError
 from ..io.atomic import write_text_atomic
 
 __all__ = ["NullModel", "SIGNS", "chosen", "statistic", "statistics", "catalogue_key", "load", "save", "FILE",
-           "FORMAT", "VERSION", "NEAREST", "PENALTIES", "SPAN"]
+           "FORMAT", "VERSION", "NEAREST", "PENALTIES", "SPAN", "KINDS"]
 
 FORMAT, VERSION = "tactrec-chance", 1
 #: the null model's file in a database folder
@@ -66,6 +72,8 @@ NEAREST = 20
 PENALTIES = (1.0, 0.3, 0.1, 0.03, 0.01)
 #: the statistics' range: a fit this many decades better or worse than its limit reads as at the end
 SPAN = 2.0
+#: the kinds of touch a calibration touch may be (:attr:`tactrec.io.touch.TactileData.kind`)
+KINDS = ("curves", "patch", "contacts")
 
 
 def statistic(mean, limit):
@@ -202,6 +210,8 @@ class NullModel:
         Each touch's ``(x1, x2)`` with the touched model in the database, and left out.
     touched : tuple of str
         Each touch's model (:meth:`without` leaves a model's touches out).
+    kinds : tuple of str
+        Each touch's kind (:data:`KINDS`; empty: all curves).
     method : str
         The method whose fits were calibrated (a recognizer of another does not use it).
     seed, touches : int
@@ -219,6 +229,7 @@ class NullModel:
     seed: int = 0
     touches: int = 0
     fitted_penalty: float | None = None
+    kinds: tuple = ()
 
     def __len__(self) -> int:
         return len(self.resolving)
@@ -232,7 +243,7 @@ class NullModel:
             self._left[leave] = dataclasses.replace(
                 self, resolving=self.resolving[keep], known=self.known[keep], unknown=self.unknown[keep],
                 touched=tuple(np.array(self.touched)[keep].tolist()), key=f"{self.key} without {','.join(leave)}",
-                fitted_penalty=None)
+                fitted_penalty=None, kinds=tuple(np.array(self.kind_of)[keep].tolist()))
         return self._left[leave]
 
     @functools.cached_property
@@ -240,24 +251,38 @@ class NullModel:
         """:meth:`without`'s models, by the names left out (each chooses its prior once)."""
         return {}
 
-    def ratio_of(self, evidence) -> float:
-        """:meth:`ratio` of a recognition's evidence (its :func:`statistics`)."""
-        return self.ratio(*statistics(evidence))
+    @property
+    def kind_of(self) -> tuple:
+        """Each calibration touch's kind (all curves where the file names none)."""
+        return self.kinds or ("curves",) * len(self)
 
-    def ratio(self, x1: float, x2: float, resolving: float) -> float:
-        """The likelihood ratio, known against unknown, of a touch whose best two fits are ``x1`` and
-        ``x2`` (:func:`statistic`) and whose resolving power is ``resolving`` (module text); 1 (no
-        evidence either way) for statistics that are not finite."""
+    def pool(self, kind: str, among=None) -> np.ndarray:
+        """The calibration touches (indices, of ``among``: a boolean mask, default all) a touch of
+        ``kind`` is weighed against: those of its kind where there are :data:`NEAREST` of them, else all."""
+        among = np.ones(len(self), dtype=bool) if among is None else np.asarray(among, dtype=bool)
+        same = among & (np.array(self.kind_of, dtype=object) == kind)
+        return np.flatnonzero(same if same.sum() >= NEAREST else among)
+
+    def ratio_of(self, evidence) -> float:
+        """:meth:`ratio` of a recognition's evidence (its :func:`statistics` and kind)."""
+        return self.ratio(*statistics(evidence), kind=getattr(evidence, "kind", "curves"))
+
+    def ratio(self, x1: float, x2: float, resolving: float, kind: str = "curves") -> float:
+        """The likelihood ratio, known against unknown, of a touch of ``kind`` whose best two fits are
+        ``x1`` and ``x2`` (:func:`statistic`) and whose resolving power is ``resolving`` (module text); 1
+        (no evidence either way) for statistics that are not finite."""
         if not np.isfinite([x1, x2, resolving]).all():
             return 1.0
-        return float(_ratios(self.resolving, self.known, self.unknown, resolving, [(x1, x2)], self.penalty)[0])
+        i = self.pool(kind)
+        return float(_ratios(self.resolving[i], self.known[i], self.unknown[i], resolving, [(x1, x2)],
+                             self.penalty)[0])
 
     @functools.cached_property
     def penalty(self) -> float:
         """The slopes' prior precision: of :data:`PENALTIES`, the one whose ratios predict the
         calibration touches best (the mean log-likelihood of their known and unknown recognitions),
-        each model's touches from the other models' alone, as a touch of an object the calibration
-        never saw would be; the first (the most cautious) of equals."""
+        each model's touches from the other models' alone (of the touch's kind, :meth:`pool`), as a touch
+        of an object the calibration never saw would be; the first (the most cautious) of equals."""
         if self.fitted_penalty is not None:
             return float(self.fitted_penalty)
         names = np.array(self.touched)
@@ -267,7 +292,7 @@ class NullModel:
         for penalty in PENALTIES:
             total = 0.0
             for t in range(len(self)):
-                keep = names != names[t]
+                keep = self.pool(self.kind_of[t], names != names[t])
                 lr = _ratios(self.resolving[keep], self.known[keep], self.unknown[keep], self.resolving[t],
                              [self.known[t], self.unknown[t]], penalty)
                 total += float(np.log(lr[0] / (1.0 + lr[0])) + np.log(1.0 / (1.0 + lr[1])))
@@ -278,7 +303,7 @@ class NullModel:
         return {"format": FORMAT, "version": VERSION, "key": self.key, "method": self.method, "seed": int(self.seed),
                 "touches": int(self.touches), "resolving": np.round(self.resolving, 6).tolist(),
                 "known": np.round(self.known, 6).tolist(), "unknown": np.round(self.unknown, 6).tolist(),
-                "touched": list(self.touched), "penalty": self.penalty}
+                "touched": list(self.touched), "kinds": list(self.kind_of), "penalty": self.penalty}
 
     @classmethod
     def from_json(cls, d, source) -> "NullModel":
@@ -293,19 +318,22 @@ class NullModel:
             known = np.asarray(d["known"], dtype=np.float64).reshape(len(r), 2)
             unknown = np.asarray(d["unknown"], dtype=np.float64).reshape(len(r), 2)
             touched = tuple(str(t) for t in d["touched"])
+            kinds = tuple(str(k) for k in d.get("kinds", ("curves",) * len(touched)))
             key, method, seed, touches = str(d["key"]), str(d["method"]), int(d["seed"]), int(d["touches"])
             fitted = d.get("penalty")
             if fitted is not None and (isinstance(fitted, bool) or not isinstance(fitted, (int, float))):
                 raise TypeError("penalty")
         except (KeyError, TypeError, ValueError, OverflowError) as exc:
             raise InputError(f"corrupted null model ({exc.__class__.__name__})", source) from None
-        if len(touched) != len(r):
-            raise InputError("corrupted null model (a touch without its model)", source)
+        if len(touched) != len(r) or len(kinds) != len(r):
+            raise InputError("corrupted null model (a touch without its model or kind)", source)
+        if not set(kinds) <= set(KINDS):
+            raise InputError(f"corrupted null model (a touch of kind {sorted(set(kinds) - set(KINDS))[0]!r})", source)
         if not (np.isfinite(r).all() and np.isfinite(known).all() and np.isfinite(unknown).all()):
             raise InputError("corrupted null model (a value is not finite)", source)
         if fitted is not None and float(fitted) not in PENALTIES:
             fitted = None                       # a precision this version does not offer: chosen again
-        return cls(key, r, known, unknown, touched, method, seed, touches, fitted)
+        return cls(key, r, known, unknown, touched, method, seed, touches, fitted, kinds)
 
 
 def save(model: NullModel, folder: str | os.PathLike) -> Path:

@@ -273,7 +273,7 @@ class Recognizer:
         found = evidence([r.model for r in ok], self._residuals_of(ok, touch),
                          [len(c) for c in touch.joint_curves], touch.noise, limits=(limit,),
                          resolution=resolution(touch, self.floor), radii=(touch.radius,),
-                         tied=self._tied(ok, touch, limit, outcome.settled))
+                         tied=self._tied(ok, touch, limit, outcome.settled), kind=touch.data.kind)
         out = Recognition(ranking, touch.estimate, 0.0, self.method.name, found, outcome.settled, outcome.work,
                           outcome.depth, touch, outcome.allowed, self.unknown_prior, self.chance)
         out.best                                # the answer and its probabilities are part of its seconds

@@ -50,9 +50,11 @@ def session_evidence(recognizer, touches: Touches, misses, ranked, keep):
         parts.append(Touch.from_data(TactileData.from_contacts(touches.joined_contacts(contacts), units=first.units,
                                                                source=first.source)))
         sizes.append(sum(len(features[i].curves) for i in contacts))
+    kinds = {f.data.kind for f in parts}
     return evidence([h.model for h in ranked], signed, curves, float(np.median([f.noise for f in features])),
                     limits=[fit_limit(f, floor) for f in parts], touches=sizes, misses=lines,
-                    resolution=min(resolution(f, floor) for f in parts), radii=[f.radius for f in parts])
+                    resolution=min(resolution(f, floor) for f in parts), radii=[f.radius for f in parts],
+                    kind=kinds.pop() if len(kinds) == 1 else "mixed")
 
 
 class JointFit:
