@@ -105,8 +105,18 @@ class Superposition:
         G = np.empty((m, 3))
         S = np.empty((m, 3))
         for sl in self._chunks(m):
-            X, jet, w, w_phi = self.transform(uv[sl], phi[sl])
+            X, jet, w, w_phi = self.transform(uv[sl], phi[sl], turning=not turn_only)
             v = self.model.implicit(X, order=2)
+            if turn_only:                   # the bisection's derivative in one compiled pass (no temporaries)
+                e, turn = _turn(v, jet.frame, self.local, phi[sl])
+                ok = jet.regular & np.isfinite(e)
+                E[sl] = np.where(ok, e, np.inf)
+                G[sl, :2] = 0.0
+                G[sl, 2] = np.where(ok, turn, 0.0)
+                S[sl, 0] = np.linalg.norm(jet.su, axis=-1)
+                S[sl, 1] = np.linalg.norm(jet.sv, axis=-1)
+                S[sl, 2] = self.radius
+                continue
             f, gx, gy, gz = v[..., 0], v[..., 1], v[..., 2], v[..., 3]
             hxx, hxy, hxz, hyy, hyz, hzz = (v[..., 4 + i] for i in range(6))
             with np.errstate(all="ignore"):
@@ -123,13 +133,9 @@ class Superposition:
             e = np.abs(g).mean(axis=1)
             ok = jet.regular & np.isfinite(e)
             E[sl] = np.where(ok, e, np.inf)
-            if turn_only:
-                G[sl, :2] = 0.0
-                G[sl, 2] = np.where(ok, turn, 0.0)
-            else:
-                grads = [np.einsum("mni,mni->m", dg, _apply(jet.frame_u, w) + jet.su[:, None, :]) * n_inv,
-                         np.einsum("mni,mni->m", dg, _apply(jet.frame_v, w) + jet.sv[:, None, :]) * n_inv, turn]
-                G[sl] = np.where(ok[:, None], np.stack(grads, axis=1), 0.0)
+            grads = [np.einsum("mni,mni->m", dg, _apply(jet.frame_u, w) + jet.su[:, None, :]) * n_inv,
+                     np.einsum("mni,mni->m", dg, _apply(jet.frame_v, w) + jet.sv[:, None, :]) * n_inv, turn]
+            G[sl] = np.where(ok[:, None], np.stack(grads, axis=1), 0.0)
             S[sl, 0] = np.linalg.norm(jet.su, axis=-1)
             S[sl, 1] = np.linalg.norm(jet.sv, axis=-1)
             S[sl, 2] = self.radius
@@ -215,6 +221,39 @@ class Superposition:
             alpha[bad] /= 8.0
             active[bad[(alpha[bad] < min_alpha) | flat[~better]]] = False
         return uv, np.mod(phi, 2 * np.pi), E
+
+
+@njit(cache=True, parallel=True, error_model="numpy")
+def _turn(v: np.ndarray, frame: np.ndarray, local: np.ndarray, phi: np.ndarray):
+    """E of eq. (11) ``(m,)`` and its derivative in phi ``(m,)`` from the implicit function's value,
+    gradient and Hessian at each turned point ``v (m, n, 10)``, the frames ``(m, 3, 3)``, the data
+    ``local (n, 3)`` and the turns ``phi (m,)``: :meth:`Superposition.energy_grad`'s formulas, each
+    candidate's sums taken over its points in order."""
+    m, n = v.shape[0], v.shape[1]
+    e = np.empty(m)
+    turn = np.empty(m)
+    for a in prange(m):
+        c, s = np.cos(phi[a]), np.sin(phi[a])
+        total, slope = 0.0, 0.0
+        for b in range(n):
+            f, gx, gy, gz = v[a, b, 0], v[a, b, 1], v[a, b, 2], v[a, b, 3]
+            hxx, hxy, hxz, hyy, hyz, hzz = v[a, b, 4], v[a, b, 5], v[a, b, 6], v[a, b, 7], v[a, b, 8], v[a, b, 9]
+            gn = np.sqrt(gx * gx + gy * gy + gz * gz)
+            g = f / gn
+            k = f / gn**3
+            sign = np.sign(g)
+            x, y = local[b, 0], local[b, 1]
+            px, py = -s * x - c * y, c * x - s * y                  # d/dphi of the turned point (z: 0)
+            qx = frame[a, 0, 0] * px + frame[a, 0, 1] * py
+            qy = frame[a, 1, 0] * px + frame[a, 1, 1] * py
+            qz = frame[a, 2, 0] * px + frame[a, 2, 1] * py
+            slope += sign * ((gx / gn - k * (hxx * gx + hxy * gy + hxz * gz)) * qx
+                             + (gy / gn - k * (hxy * gx + hyy * gy + hyz * gz)) * qy
+                             + (gz / gn - k * (hxz * gx + hyz * gy + hzz * gz)) * qz)
+            total += abs(g)
+        e[a] = total / n
+        turn[a] = slope / n
+    return e, turn
 
 
 @njit(cache=True, parallel=True)
