@@ -497,6 +497,7 @@ def test_bench_sweep_options_belong_to_their_benchmarks(tmp_path, capsys):
     bad(capsys, ["bench", "kernels", "--radii", "6", "--out", tmp_path / "bench"], "kernels",
         "--radii applies to patch only")
     bad(capsys, ["bench", "patch", "--blur", "-1", "--out", tmp_path / "bench"], "patch", "--blur must be")
+    bad(capsys, ["calibrate", "--db", tmp_path / "db", "--kinds", "curves,gel"], "--kinds", "kinds among")
     bad(capsys, ["bench", "multi-touch", "--sets", "hard-10,soft", "--out", tmp_path / "bench"], "--sets",
         "unknown set 'soft'")
     bad(capsys, ["bench", "calibration", "--strategies", "next", "--out", tmp_path / "bench"], "calibration",

@@ -150,7 +150,8 @@ def test_a_damaged_null_model_is_named_set_aside_and_calibrated_again(tmp_path, 
     out, err = capsys.readouterr()
     assert json.loads(out)["calibrated"] is False
     assert len(err.strip().splitlines()) == 1 and FILE in err and "calibrate" in err
-    assert main(["calibrate", "--db", str(db), "--touches", "2", "--lengths", "6,16", "--quiet"]) == 0
+    assert main(["calibrate", "--db", str(db), "--touches", "2", "--lengths", "6,16", "--kinds", "curves",
+                 "--quiet"]) == 0
     assert load(db) is not None
 
 
@@ -187,7 +188,7 @@ def test_calibrate_command_writes_it_and_recognize_reports_it(tmp_path, capsys):
     db = tmp_path / "db"
     assert main(["build", "sphere-33", "cylinder-50", "--out", str(db), "--quiet"]) == 0
     assert main(["calibrate", "--db", str(db), "--touches", "2", "--lengths", "6,16", "--quiet"]) == 0
-    assert (db / FILE).is_file()
+    assert (db / FILE).is_file() and set(load(db).kind_of) == {"curves", "patch"}      # by default both kinds
     data = tmp_path / "t.json"
     assert main(["simulate", "sphere-33", "--out", str(data), "--seed", "1", "--spacing", "0.2"]) == 0
     capsys.readouterr()
