@@ -15,7 +15,6 @@ from tactrec.database import build_database, build_entries, load_database
 from tactrec.errors import InputError
 from tactrec.estimation import estimate
 from tactrec.features import Context
-from tactrec.io.touch import save_touch
 from tactrec.methods import DEFAULT_METHOD
 from tactrec.recognition import ModelEntry, Recognizer, recognize
 from tactrec.registration import closedform_fast, mesh_fast
@@ -471,39 +470,6 @@ def test_starting_poses_put_the_contact_on_candidate_vertices(scans):
     contacts = np.einsum("hij,j->hi", R, geom.contact) + t
     assert np.max(m.distance(contacts)) < 1e-9                      # each start sits on a vertex
     assert np.allclose(np.einsum("hji,hjk->hik", R, R), np.eye(3), atol=1e-9)
-
-
-_CHILD = """
-import json, sys
-from tactrec.io.touch import load_touch
-from tactrec.recognition import Recognizer
-sys.path.insert(0, sys.argv[1])
-from conftest import small_meshes
-with Recognizer(small_meshes()) as r:
-    for path in sys.argv[2:]:
-        res = r.recognize(load_touch(path))
-        print(json.dumps({"best": res.best, "ambiguous": res.ambiguous,
-                          "location": res.registration.location.tolist()}))
-"""
-
-
-def _in_a_process(kernel: str, paths) -> list[dict]:
-    env = dict(os.environ, OPENBLAS_CORETYPE=kernel)
-    out = subprocess.run([sys.executable, "-c", _CHILD, os.path.dirname(__file__), *map(str, paths)], env=env,
-                         capture_output=True, text=True, timeout=600, check=True).stdout
-    return [json.loads(line) for line in out.splitlines()]
-
-
-def test_the_same_answer_under_two_blas_kernels(small, tmp_path):
-    """The same 24 touch files recognised under the Prescott and Haswell kernels of OpenBLAS:
-    the same answers, ambiguous ones included, and the same contacts to the last bit."""
-    paths = []
-    for k, (_, touch) in enumerate(_small_touches(small, 6, noise=0.02, outward=False)):
-        paths.append(tmp_path / f"touch-{k}.json")
-        save_touch(touch, paths[-1])
-    a, b = _in_a_process("Prescott", paths), _in_a_process("Haswell", paths)
-    assert len(a) == len(b) == 24
-    assert a == b
 
 
 def test_fast_vs_paper_bench_writes_its_table_and_plot(tmp_path):

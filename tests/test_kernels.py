@@ -3,8 +3,9 @@
 OpenBLAS picks its kernels by CPU (``OPENBLAS_CORETYPE`` overrides the choice), and kernels round
 differently.  The same touches, simulated and recognised under two kernels, must give the same
 results to the last bit: a P3 and a hard noisy touch on two scans, a closed-form touch, a tip's and
-one with outliers, a touch with method ``paper``, and a two-touch session with ``next``'s proposal
-after each touch.
+one with outliers, a touch with method ``paper``, a two-touch session with ``next``'s proposal
+after each touch, and 24 noisy touches without an outward side on the four small meshes (ambiguous
+answers included).
 """
 
 import json
@@ -14,6 +15,7 @@ import sys
 
 SCRIPT = r"""
 import json
+import sys
 import numpy as np
 from tactrec.bench.answers import HARD, P3, without_timings as clean
 from tactrec.bench.common import random_face_site, random_site_touch
@@ -58,13 +60,25 @@ with Recognizer(closed, workers=1) as rec:
     touch = simulate_random_touch(closed[0].model, spacing=0.02, points=41, noise=0.001,
                                   rng=np.random.default_rng(3))
     out["closed-form-ellipsoid"] = [clean(touch.curves), clean(rec.recognize(touch).to_json())]
+sys.path.insert(0, TESTS)
+from conftest import small_meshes
+small = small_meshes()
+with Recognizer(small, workers=1) as rec:
+    for m, entry in enumerate(small):
+        for i in range(6):
+            touch = simulate_random_touch(entry.model, rng=np.random.default_rng((21, m, i)), points=41, spacing=0.3,
+                                          angle=60.0, noise=0.02, noise_kind="gaussian", outward=False)
+            found = rec.recognize(touch)
+            out[f"small-{entry.name}-{i}"] = [clean(touch.curves), found.best, found.ambiguous,
+                                              found.registration.location.tolist()]
 print(json.dumps(out, sort_keys=True, allow_nan=True))
 """
 
 
 def _run(coretype: str) -> subprocess.Popen:
     env = dict(os.environ, OPENBLAS_CORETYPE=coretype, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
-    return subprocess.Popen([sys.executable, "-c", SCRIPT], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+    script = f"TESTS = {os.path.dirname(os.path.abspath(__file__))!r}\n" + SCRIPT
+    return subprocess.Popen([sys.executable, "-c", script], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True)
 
 
@@ -76,5 +90,5 @@ def test_results_are_the_same_under_every_blas_kernel():
         assert proc.returncode == 0, stderr[-2000:]
         outputs[kind] = stdout
     answers = json.loads(outputs["Haswell"])
-    assert len(answers) == 9 and all(answers.values())
+    assert len(answers) == 9 + 24 and all(answers.values())
     assert outputs["Haswell"] == outputs["Prescott"]
