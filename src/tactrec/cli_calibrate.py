@@ -41,7 +41,8 @@ def add_calibrate_parser(sub, *, count, methods, default_method):
                    help="the small touches' noise sigma, the models' units (default 0.01,0.08)")
     p.add_argument("--kinds", type=_kinds, default=("curves", "patch"), metavar="KIND[,KIND]",
                    help="the kinds of calibration touch, each weighed against its own (curves, patch, contacts; "
-                   "default curves,patch: a touch of contacts is searched by triangles of places, tens of seconds a touch)")
+                   "default curves,patch: a touch of contacts is searched by triangles of places, tens of "
+                   "seconds a touch)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--method", choices=sorted(methods), default=default_method,
                    help=f"the method whose fits are calibrated (default {default_method})")

@@ -65,12 +65,12 @@ the models within the search's ``ratio`` of the best, which its next round would
 evenly.  The answer is still the lowest error; how sure it is falls with each model tied to it.
 
 Nothing comes from a simulation setting: the scatter is the touch's own.  Points off their curve's trace
-(:mod:`tactrec.outliers`) are no evidence for or against any model.  Models the search rejected or deferred have no probability; the accepted models'
-probabilities and ``unknown``'s sum to one.  The replicates are drawn from a fixed seed and averaged
-without BLAS, so the same touch gives the same probabilities on every machine.  ``tactrec bench
-calibration`` and ``tactrec bench open-world`` measure how well the confidence matches the share of
-right answers.  ``confidence`` is the best model's probability; a result is ``ambiguous`` when it is
-below :data:`AMBIGUOUS`.
+(:mod:`tactrec.outliers`) are no evidence for or against any model.  Models the search rejected or deferred
+have no probability; the accepted models' probabilities and ``unknown``'s sum to one.  The replicates are drawn
+from a fixed seed and averaged without BLAS, so the same touch gives the same probabilities on every
+machine.  ``tactrec bench calibration`` and ``tactrec bench open-world`` measure how well the confidence
+matches the share of right answers.  ``confidence`` is the best model's probability; a result is ``ambiguous``
+when it is below :data:`AMBIGUOUS`.
 """
 
 from __future__ import annotations

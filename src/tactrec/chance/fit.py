@@ -118,7 +118,8 @@ def calibrate(recognizer, *, touches: int = TOUCHES, seed: int = 0, lengths=LENG
     names = [e.name for e in entries]
     floor = recognizer.floor
     r, known, unknown, touched, made = [], [], [], [], []
-    for kind, m, i in ((k, m, i) for k in KINDS if k in kinds for m in range(len(entries)) for i in range(int(touches))):
+    order = ((k, m, i) for k in KINDS if k in kinds for m in range(len(entries)) for i in range(int(touches)))
+    for kind, m, i in order:
         entry, others = entries[m], names[:m] + names[m + 1:]
         # a curve's seed as before kinds were calibrated: the curves' statistics do not move
         extra = [] if kind == "curves" else [KINDS.index(kind)]
