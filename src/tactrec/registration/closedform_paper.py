@@ -109,38 +109,37 @@ class Superposition:
             v = self.model.implicit(X, order=2)
             if turn_only:                   # the bisection's derivative in one compiled pass (no temporaries)
                 e, turn = _turn(v, jet.frame, self.local, phi[sl])
-                ok = jet.regular & np.isfinite(e)
-                E[sl] = np.where(ok, e, np.inf)
-                G[sl, :2] = 0.0
-                G[sl, 2] = np.where(ok, turn, 0.0)
-                S[sl, 0] = np.linalg.norm(jet.su, axis=-1)
-                S[sl, 1] = np.linalg.norm(jet.sv, axis=-1)
-                S[sl, 2] = self.radius
-                continue
-            f, gx, gy, gz = v[..., 0], v[..., 1], v[..., 2], v[..., 3]
-            hxx, hxy, hxz, hyy, hyz, hzz = (v[..., 4 + i] for i in range(6))
-            with np.errstate(all="ignore"):
-                gn = np.sqrt(gx * gx + gy * gy + gz * gz)
-                g = f / gn
-                c = f / gn**3
-                # d/dx (f / |grad f|) = grad f / |grad f| - f H grad f / |grad f|^3, times sign(g)
-                sign = np.sign(g)
-                dg = np.stack([gx / gn - c * (hxx * gx + hxy * gy + hxz * gz),
-                               gy / gn - c * (hxy * gx + hyy * gy + hyz * gz),
-                               gz / gn - c * (hxz * gx + hyz * gy + hzz * gz)], axis=-1) * sign[..., None]
-            n_inv = 1.0 / len(self.local)
-            turn = np.einsum("mni,mni->m", dg, _apply(jet.frame, w_phi)) * n_inv
-            e = np.abs(g).mean(axis=1)
+                grads = [np.zeros_like(turn), np.zeros_like(turn), turn]
+            else:
+                e, grads = self._gradient(v, jet, w, w_phi)
             ok = jet.regular & np.isfinite(e)
             E[sl] = np.where(ok, e, np.inf)
-            grads = [np.einsum("mni,mni->m", dg, _apply(jet.frame_u, w) + jet.su[:, None, :]) * n_inv,
-                     np.einsum("mni,mni->m", dg, _apply(jet.frame_v, w) + jet.sv[:, None, :]) * n_inv, turn]
             G[sl] = np.where(ok[:, None], np.stack(grads, axis=1), 0.0)
             S[sl, 0] = np.linalg.norm(jet.su, axis=-1)
             S[sl, 1] = np.linalg.norm(jet.sv, axis=-1)
             S[sl, 2] = self.radius
         G[~np.isfinite(G)] = 0.0
         return E, G, S
+
+    def _gradient(self, v: np.ndarray, jet, w: np.ndarray, w_phi: np.ndarray):
+        """E ``(m,)`` and its gradient in (u, v, phi) as three ``(m,)`` arrays, from the implicit function's
+        value, gradient and Hessian at the turned points ``v (m, n, 10)`` (:meth:`energy_grad`)."""
+        f, gx, gy, gz = v[..., 0], v[..., 1], v[..., 2], v[..., 3]
+        hxx, hxy, hxz, hyy, hyz, hzz = (v[..., 4 + i] for i in range(6))
+        with np.errstate(all="ignore"):
+            gn = np.sqrt(gx * gx + gy * gy + gz * gz)
+            g = f / gn
+            c = f / gn**3
+            # d/dx (f / |grad f|) = grad f / |grad f| - f H grad f / |grad f|^3, times sign(g)
+            sign = np.sign(g)
+            dg = np.stack([gx / gn - c * (hxx * gx + hxy * gy + hxz * gz),
+                           gy / gn - c * (hxy * gx + hyy * gy + hyz * gz),
+                           gz / gn - c * (hxz * gx + hyz * gy + hzz * gz)], axis=-1) * sign[..., None]
+        n_inv = 1.0 / len(self.local)
+        turn = np.einsum("mni,mni->m", dg, _apply(jet.frame, w_phi)) * n_inv
+        return np.abs(g).mean(axis=1), [
+            np.einsum("mni,mni->m", dg, _apply(jet.frame_u, w) + jet.su[:, None, :]) * n_inv,
+            np.einsum("mni,mni->m", dg, _apply(jet.frame_v, w) + jet.sv[:, None, :]) * n_inv, turn]
 
     # ------------------------------------------------------------------ phi
     def initial_phi(self, uv: np.ndarray, *, samples: int, bisections: int):
