@@ -1,5 +1,8 @@
-"""The fixtures the test files share: model sets built once per test process."""
+"""The fixtures the test files share: model sets built once per test process, and each mesh's distance
+field built once per test run."""
 
+import hashlib
+import os
 import warnings
 
 import numpy as np
@@ -60,3 +63,38 @@ def _quiet_numpy():
         warnings.simplefilter("error", category=DeprecationWarning)
         with np.errstate(all="warn"):
             yield
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _fields_built_once(tmp_path_factory, worker_id):
+    """A mesh's distance field is built once per run of the suite: many test files search the same YCB
+    scans, each building its own models (and databases), and a field's build is the largest part of
+    that.  The first build of a mesh (its vertices, faces and the build's arguments) is kept in the
+    run's temporary folder, which the run's worker processes share, and later builds read it.  A new
+    run builds every field again, so each BLAS kernel's run builds its own."""
+    from tactrec.surfaces import mesh
+    from tactrec.surfaces.mesh_field import DistanceField
+
+    run = tmp_path_factory.getbasetemp()
+    folder = (run if worker_id == "master" else run.parent) / "fields"
+    folder.mkdir(exist_ok=True)
+    build = mesh.build_field
+
+    def built_once(vertices, faces, **options):
+        digest = hashlib.sha256(np.ascontiguousarray(vertices, dtype=np.float64).tobytes())
+        digest.update(np.ascontiguousarray(faces, dtype=np.int64).tobytes())
+        digest.update(repr(sorted(options.items())).encode())
+        path = folder / f"{digest.hexdigest()}.npz"
+        if path.exists():
+            with np.load(path, allow_pickle=False) as arrays:
+                return DistanceField.from_store(arrays)
+        field = build(vertices, faces, **options)
+        part = folder / f"{path.stem}.{os.getpid()}.part.npz"
+        np.savez(part, **field.to_store())
+        os.replace(part, path)
+        return field
+
+    patch = pytest.MonkeyPatch()
+    patch.setattr(mesh, "build_field", built_once)
+    yield
+    patch.undo()

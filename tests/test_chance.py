@@ -29,12 +29,15 @@ def fitted():
     return db, model
 
 
-def _touches(db, count, seed):
-    """``count`` seeded touches, alternately noisy and clean, each of a model in turn: (index, data)."""
+def _touches(db, count, seed, model=None):
+    """``count`` seeded touches, alternately noisy and clean, each of a model in turn: (index, data);
+    ``model``: only those of that model (index)."""
     out = []
     for i in range(count):
         rng = np.random.default_rng([seed, i])
         m = i % len(db.entries)
+        if model is not None and m != model:
+            continue
         noisy = i % 2 == 0
         data = simulate_random_touch(db.entries[m].model, rng=rng, points=41, spacing=(8.0 if noisy else 14.0) / 40,
                                      angle=30.0 if noisy else 60.0, noise=0.03 if noisy else 0.0,
@@ -219,7 +222,7 @@ def test_twins_that_differ_nowhere_are_never_sure(tmp_path, fitted):
     twins = build_entries(["sphere-33", str(twin), "cylinder-50"])
     with Recognizer(twins.entries) as r:
         model = calibrate(r, touches=4, seed=0, lengths=LENGTHS)
-    sphere = [(m, data) for m, data in _touches(twins, 60, seed=7) if m == 0][:20]
+    sphere = _touches(twins, 60, seed=7, model=0)
     assert len(sphere) == 20
     for chance in (model, None):
         with Recognizer(twins.entries, chance=chance) as r:
