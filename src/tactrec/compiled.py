@@ -1,7 +1,7 @@
 """What every compiled kernel of the package shares: numba's threading layer.
 
-The kernels (:mod:`tactrec.surfaces.field_kernels`, :mod:`tactrec.registration.step`,
-:mod:`tactrec.registration.anderson`, :mod:`tactrec.registration.closedform_paper`,
+The kernels (:mod:`tactrec.surfaces.field_kernels`, :mod:`tactrec.surfaces.field_raster`,
+:mod:`tactrec.registration.step`, :mod:`tactrec.registration.anderson`, :mod:`tactrec.registration.closedform_paper`,
 :mod:`tactrec.surfaces.table_kernels`,
 :mod:`tactrec.engine.kernels`, :mod:`tactrec.index.kernels`)
 are compiled by numba, cached on disk, without ``fastmath``.  A

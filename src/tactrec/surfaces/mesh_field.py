@@ -12,10 +12,14 @@ is scored on a grid and exact distances only refine and decide.
   each with its corner samples (``BRICK + 1`` a side, so that no lookup
   crosses bricks), as 16-bit integers in units of ``truncation / 32767``.
 * **Sign**: positive on the side of the surface's outward normal, by the
-  angle-weighted pseudonormal of the closest feature (libigl).  On a closed
-  mesh that is outside; on an open scan it is the side of the nearest
+  angle-weighted pseudonormal of the closest feature (libigl's normals).  On a
+  closed mesh that is outside; on an open scan it is the side of the nearest
   surface's normal, which within the band, where the field is kept, is what
-  a point-to-plane step needs.  Screens use the distance's magnitude.
+  a point-to-plane step needs.  Beyond the band a sample takes the side of
+  its neighbour (:mod:`.field_raster`).  Screens use the distance's magnitude.
+* **Build**: each face is swept over the samples of the bricks within the
+  band of it (:mod:`.field_raster`), not each sample searched for its
+  nearest face.
 
 Trilinear interpolation is exact on a plane and off by about
 ``spacing^2 |kappa| / 8`` on a curved patch; near an edge or a thin wall it
@@ -153,6 +157,35 @@ def _candidate_bricks(vertices: np.ndarray, faces: np.ndarray, origin: np.ndarra
     return np.stack([key // (shape[1] * shape[2]), (key // shape[2]) % shape[1], key % shape[2]], axis=1)
 
 
+def _listed(vertices, faces, origin, block, reach, shape, blocks):
+    """For each brick of ``blocks (k, 3)`` the faces whose bounding box, grown by ``reach``, meets it:
+    ``starts (k + 1,)`` and ``listed``, brick ``i``'s faces ``listed[starts[i]:starts[i + 1]]`` in
+    increasing order."""
+    if not len(blocks):
+        return np.zeros(1, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    tri = vertices[faces]
+    lo = np.clip(np.floor((tri.min(axis=1) - reach - origin) / block).astype(np.int64), 0, shape - 1)
+    hi = np.clip(np.floor((tri.max(axis=1) + reach - origin) / block).astype(np.int64), 0, shape - 1)
+    kept = (blocks[:, 0] * shape[1] + blocks[:, 1]) * shape[2] + blocks[:, 2]
+    order = np.argsort(kept, kind="stable")
+    where, face = [], []
+    span = int((hi - lo).max()) + 1
+    for dx in range(span):
+        for dy in range(span):
+            for dz in range(span):
+                b = lo + np.array([dx, dy, dz])
+                ok = np.flatnonzero(np.all(b <= hi, axis=1))
+                key = (b[ok, 0] * shape[1] + b[ok, 1]) * shape[2] + b[ok, 2]
+                at = np.minimum(np.searchsorted(kept, key, sorter=order), len(kept) - 1)
+                found = kept[order[at]] == key
+                where.append(order[at[found]])
+                face.append(ok[found])
+    where, face = np.concatenate(where), np.concatenate(face)
+    sort = np.lexsort((face, where))
+    starts = np.concatenate([[0], np.cumsum(np.bincount(where, minlength=len(blocks)))])
+    return starts.astype(np.int64), np.ascontiguousarray(face[sort], dtype=np.int64)
+
+
 def build_field(vertices: np.ndarray, faces: np.ndarray, *, mean_edge: float, spacing: float | None = None,
                 band: int = BAND, offset: float = 0.0) -> DistanceField:
     """The truncated signed distance field of a mesh (see the module text): its spacing is
@@ -162,6 +195,7 @@ def build_field(vertices: np.ndarray, faces: np.ndarray, *, mean_edge: float, sp
     import igl
 
     from .field_kernels import BRICK
+    from .field_raster import brick_distances
 
     h = float(spacing if spacing is not None else SPACING * mean_edge)
     truncation = band * h
@@ -178,18 +212,16 @@ def build_field(vertices: np.ndarray, faces: np.ndarray, *, mean_edge: float, sp
     near, _, _ = igl.point_mesh_squared_distance(centre, vertices, faces)
     blocks = blocks[np.abs(np.sqrt(np.asarray(near, dtype=np.float64)) - r) <= truncation + 0.5 * np.sqrt(3.0) * block
                     + 1e-9 * block]
-    # neighbouring bricks share their faces' samples: each lattice point is measured once
-    steps = np.arange(BRICK + 1)
-    grid = np.stack(np.meshgrid(steps, steps, steps, indexing="ij"), axis=-1).reshape(-1, 3)
-    lattice = (blocks[:, None, :] * BRICK + grid[None]).reshape(-1, 3)                # (k (BRICK+1)^3, 3)
-    side = shape * BRICK + 1
-    lattice, at = np.unique((lattice[:, 0] * side[1] + lattice[:, 1]) * side[2] + lattice[:, 2], return_inverse=True)
-    lattice = np.stack([lattice // (side[1] * side[2]), (lattice // side[2]) % side[1], lattice % side[2]], axis=1)
-    points = origin + lattice * h
-    d, _, _, _ = igl.signed_distance(points, vertices, faces, sign_type=igl.SIGNED_DISTANCE_TYPE_PSEUDONORMAL,
-                                     upper_bound=reach * 1.000001)
-    d = np.nan_to_num(np.asarray(d, dtype=np.float64), nan=reach, posinf=reach, neginf=-reach) - r
-    d = np.clip(d, -truncation, truncation)[at.reshape(-1)].reshape(len(blocks), -1)
+    # each face is swept over the samples of the bricks within reach of it (:mod:`.field_raster`)
+    starts, listed = _listed(vertices, faces, origin, block, reach, shape, blocks)
+    fn = igl.per_face_normals(vertices, faces, np.full(3, 1.0 / np.sqrt(3.0)))
+    vn = igl.per_vertex_normals(vertices, faces, igl.PER_VERTEX_NORMALS_WEIGHTING_TYPE_ANGLE)
+    en, _, emap = igl.per_edge_normals(vertices, faces, igl.PER_EDGE_NORMALS_WEIGHTING_TYPE_UNIFORM)
+    c = np.ascontiguousarray
+    d = brick_distances(c(vertices, dtype=np.float64), c(faces, dtype=np.int64), c(fn), c(vn), c(en),
+                        c(np.asarray(emap, dtype=np.int64).reshape(3, len(faces)).T), c(origin), h, reach,
+                        c(blocks, dtype=np.int64), starts, listed, BRICK).reshape(len(blocks), -1) - r
+    d = np.clip(d, -truncation, truncation)
     keep = np.min(np.abs(d), axis=1) < truncation
     blocks, d = blocks[keep], d[keep]
     index = np.full(tuple(shape), -1, dtype=np.int32)
