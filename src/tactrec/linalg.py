@@ -15,8 +15,9 @@ import math
 
 import numpy as np
 
-__all__ = ["transform", "rotate", "tangents", "compose", "solve_spd", "gram", "stable_order", "stable_prefix", "clearly_less",
-           "QUANTUM", "dot3", "norm3", "det3", "times", "eigh", "eigvalsh", "lstsq", "inverse_spd", "RANK_TOL"]
+__all__ = ["transform", "rotate", "tangents", "compose", "solve_spd", "gram", "stable_order", "stable_prefix",
+           "clearly_less", "QUANTUM", "cross", "dot3", "norm3", "det3", "times", "eigh", "eigvalsh", "lstsq",
+           "inverse_spd", "RANK_TOL"]
 
 #: relative size of the score bands within which :func:`stable_order` breaks ties by index
 QUANTUM = 1e-9
@@ -29,6 +30,15 @@ def dot3(a, b) -> np.ndarray:
     ``v @ v`` without the BLAS."""
     a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
     return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
+
+
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``a x b`` over the last axis (``(..., 3)``; :func:`numpy.cross` without its overhead on small arrays)."""
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
+    out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
+    out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+    return out
 
 
 def norm3(v) -> np.ndarray:

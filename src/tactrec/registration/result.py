@@ -7,7 +7,7 @@ import enum
 
 import numpy as np
 
-from ..linalg import dot3, norm3, transform
+from ..linalg import cross, dot3, norm3, transform
 
 __all__ = ["Registration", "Outcome", "local_frame", "rotations_z", "rotations_from_vectors", "cross",
            "apply_poses"]
@@ -156,15 +156,6 @@ def rotations_from_vectors(axis_angle: np.ndarray) -> np.ndarray:
     K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = k[:, 2], -k[:, 1], k[:, 0]
     s, c = np.sin(theta)[:, None, None], np.cos(theta)[:, None, None]
     return np.eye(3) + s * K + (1 - c) * (k[:, :, None] * k[:, None, :] - np.eye(3))      # K K = k k^T - I
-
-
-def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``a x b`` over the last axis (``(..., 3)``; :func:`numpy.cross` without its overhead on small arrays)."""
-    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
-    out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
-    out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
-    out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
-    return out
 
 
 def apply_poses(R: np.ndarray, t: np.ndarray, x: np.ndarray) -> np.ndarray:

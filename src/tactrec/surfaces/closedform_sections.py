@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from ..linalg import dot3
+from ..linalg import cross, dot3
 
 __all__ = ["trace_sections", "unit_vectors", "project_out"]
 
@@ -46,8 +46,9 @@ def trace_sections(surface, site, tangents, *, spacing: float, count: int, subst
 
     def velocity(uv_, prev_):
         s_, su, sv, *_ = surface._derivatives(uv_[:, 0], uv_[:, 1])
-        nn = surface._orientation(s_, np.cross(su, sv))[:, None] * unit_vectors(np.cross(su, sv))[0]
-        t = unit_vectors(np.cross(m, nn))[0]
+        normal = cross(su, sv)
+        nn = surface._orientation(s_, normal)[:, None] * unit_vectors(normal)[0]
+        t = unit_vectors(cross(m, nn))[0]
         t = np.where(np.sum(t * prev_, axis=1, keepdims=True) < 0, -t, t)
         a, b, c = dot3(su, su), dot3(su, sv), dot3(sv, sv)           # J^T J for J = [su sv], 2 x 2
         gu, gv = dot3(su, t), dot3(sv, t)

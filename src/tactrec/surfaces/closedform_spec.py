@@ -75,8 +75,11 @@ def compile_numpy(exprs, args):
         arrays = [np.asarray(a, dtype=np.float64) for a in arrays]
         shape = np.broadcast_shapes(*(a.shape for a in arrays))
         with np.errstate(all="ignore"):
-            out = fn(*arrays)
-        return np.stack([np.broadcast_to(np.asarray(o, dtype=np.float64), shape) for o in out], axis=-1)
+            parts = fn(*arrays)
+        out = np.empty(shape + (len(parts),))
+        for i, part in enumerate(parts):              # a constant part is broadcast by the assignment
+            out[..., i] = part
+        return out
 
     return call
 
