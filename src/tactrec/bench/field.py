@@ -96,7 +96,7 @@ def run(*, out, instances: int = 5, seed: int = 0, jobs=None, quiet: bool = Fals
 def _markdown(table: dict) -> str:
     t = table["total"]
     lines = [f"{t['models']} meshes ({table['scans']}), {1000 * table['instances']} points each on the surface and "
-             f"in the band; fields {t['bytes'] / 1e6:.1f} MB in all, built in {t['build_seconds']:.1f} s (one core)",
+             f"in the band; fields {t['bytes'] / 1e6:.1f} MB in all, built in {t['build_seconds']:.1f} s",
              "",
              "| model | spacing mm | bricks | MB | build s | on the surface: median / p95 / max mm "
              "| in the band: median / p95 / max mm |",
