@@ -66,7 +66,7 @@ def _quiet_numpy():
 
 
 @pytest.fixture(scope="session", autouse=True)
-def _fields_built_once(tmp_path_factory, worker_id):
+def _fields_built_once(tmp_path_factory, request):
     """A mesh's distance field is built once per run of the suite: many test files search the same YCB
     scans, each building its own models (and databases), and a field's build is the largest part of
     that.  The first build of a mesh (its vertices, faces and the build's arguments) is kept in the
@@ -76,7 +76,8 @@ def _fields_built_once(tmp_path_factory, worker_id):
     from tactrec.surfaces.mesh_field import DistanceField
 
     run = tmp_path_factory.getbasetemp()
-    folder = (run if worker_id == "master" else run.parent) / "fields"
+    worker = getattr(request.config, "workerinput", None)           # pytest-xdist's, in its workers alone
+    folder = (run if worker is None else run.parent) / "fields"
     folder.mkdir(exist_ok=True)
     build = mesh.build_field
 
