@@ -109,7 +109,8 @@ def test_the_field_survives_storage_and_a_malformed_one_is_refused(sphere):
     again = DistanceField.from_store(field.to_store())
     p = _band_points(sphere, np.random.default_rng(3), 100, 1.0)
     np.testing.assert_array_equal(again.signed(p), field.signed(p))
-    for key, bad in [("field_bricks", field.bricks.astype(np.float32)), ("field_index", field.index + len(field.bricks)),
+    for key, bad in [("field_bricks", field.bricks.astype(np.float32)),
+                     ("field_index", field.index + len(field.bricks)),
                      ("field_spacing", np.array(-1.0)), ("field_origin", np.zeros(2))]:
         with pytest.raises(ValueError, match="distance field"):
             DistanceField.from_store(dict(field.to_store(), **{key: bad}))
