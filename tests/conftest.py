@@ -68,7 +68,7 @@ def _quiet_numpy():
 @pytest.fixture(scope="session", autouse=True)
 def _fields_built_once(tmp_path_factory, request):
     """A mesh's distance field is built once per run of the suite: many test files search the same YCB
-    scans, each building its own models (and databases), and a field's build is the largest part of
+    scans, each building its own models (and databases), and a field's build is a large part of
     that.  The first build of a mesh (its vertices, faces and the build's arguments) is kept in the
     run's temporary folder, which the run's worker processes share, and later builds read it.  A new
     run builds every field again, so each BLAS kernel's run builds its own."""
