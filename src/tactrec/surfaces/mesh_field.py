@@ -137,53 +137,37 @@ class DistanceField:
         return cls(origin, spacing, truncation, index, bricks)
 
 
-def _candidate_bricks(vertices: np.ndarray, faces: np.ndarray, origin: np.ndarray, block: float,
-                      reach: float, shape: np.ndarray) -> np.ndarray:
-    """Indices ``(k, 3)`` of the blocks that any face's bounding box, grown by ``reach``, meets."""
-    tri = vertices[faces]
-    lo = np.floor((tri.min(axis=1) - reach - origin) / block).astype(np.int64)
-    hi = np.floor((tri.max(axis=1) + reach - origin) / block).astype(np.int64)
-    lo, hi = np.clip(lo, 0, shape - 1), np.clip(hi, 0, shape - 1)
-    span = int((hi - lo).max()) + 1
-    found = []
-    for dx in range(span):
-        for dy in range(span):
-            for dz in range(span):
-                b = lo + np.array([dx, dy, dz])
-                ok = np.all(b <= hi, axis=1)
-                found.append(b[ok])
-    b = np.concatenate(found)
-    key = np.unique((b[:, 0] * shape[1] + b[:, 1]) * shape[2] + b[:, 2])
-    return np.stack([key // (shape[1] * shape[2]), (key // shape[2]) % shape[1], key % shape[2]], axis=1)
-
-
-def _listed(vertices, faces, origin, block, reach, shape, blocks):
-    """For each brick of ``blocks (k, 3)`` the faces whose bounding box, grown by ``reach``, meets it:
-    ``starts (k + 1,)`` and ``listed``, brick ``i``'s faces ``listed[starts[i]:starts[i + 1]]`` in
-    increasing order."""
-    if not len(blocks):
-        return np.zeros(1, dtype=np.int64), np.zeros(0, dtype=np.int64)
+def _face_bricks(vertices: np.ndarray, faces: np.ndarray, origin: np.ndarray, block: float, reach: float,
+                 shape: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Every pair of a block and a face whose bounding box, grown by ``reach``, meets it: the blocks'
+    keys (their flat index in a grid of ``shape``) and the faces, ``(p,)`` each."""
     tri = vertices[faces]
     lo = np.clip(np.floor((tri.min(axis=1) - reach - origin) / block).astype(np.int64), 0, shape - 1)
     hi = np.clip(np.floor((tri.max(axis=1) + reach - origin) / block).astype(np.int64), 0, shape - 1)
-    kept = (blocks[:, 0] * shape[1] + blocks[:, 1]) * shape[2] + blocks[:, 2]
-    order = np.argsort(kept, kind="stable")
-    where, face = [], []
     span = int((hi - lo).max()) + 1
+    keys, found = [], []
     for dx in range(span):
         for dy in range(span):
             for dz in range(span):
                 b = lo + np.array([dx, dy, dz])
                 ok = np.flatnonzero(np.all(b <= hi, axis=1))
-                key = (b[ok, 0] * shape[1] + b[ok, 1]) * shape[2] + b[ok, 2]
-                at = np.minimum(np.searchsorted(kept, key, sorter=order), len(kept) - 1)
-                found = kept[order[at]] == key
-                where.append(order[at[found]])
-                face.append(ok[found])
-    where, face = np.concatenate(where), np.concatenate(face)
-    sort = np.lexsort((face, where))
-    starts = np.concatenate([[0], np.cumsum(np.bincount(where, minlength=len(blocks)))])
-    return starts.astype(np.int64), np.ascontiguousarray(face[sort], dtype=np.int64)
+                keys.append((b[ok, 0] * shape[1] + b[ok, 1]) * shape[2] + b[ok, 2])
+                found.append(ok)
+    return np.concatenate(keys), np.concatenate(found)
+
+
+def _listed(keys: np.ndarray, faces: np.ndarray, kept: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For each block of ``kept`` (keys, increasing) the faces paired with it in ``keys, faces``
+    (:func:`_face_bricks`): ``starts (k + 1,)`` and ``listed``, block ``i``'s faces
+    ``listed[starts[i]:starts[i + 1]]`` in increasing order."""
+    if not len(kept):
+        return np.zeros(1, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    at = np.minimum(np.searchsorted(kept, keys), len(kept) - 1)
+    found = kept[at] == keys
+    where, faces = at[found], faces[found]
+    sort = np.lexsort((faces, where))
+    starts = np.concatenate([[0], np.cumsum(np.bincount(where, minlength=len(kept)))])
+    return starts.astype(np.int64), np.ascontiguousarray(faces[sort], dtype=np.int64)
 
 
 def build_field(vertices: np.ndarray, faces: np.ndarray, *, mean_edge: float, spacing: float | None = None,
@@ -205,15 +189,18 @@ def build_field(vertices: np.ndarray, faces: np.ndarray, *, mean_edge: float, sp
     low, high = vertices.min(axis=0), vertices.max(axis=0)
     origin = low - reach - h
     shape = np.floor((high + reach + h - origin) / block).astype(np.int64) + 1
-    blocks = _candidate_bricks(vertices, faces, origin, block, reach, shape)
+    keys, paired = _face_bricks(vertices, faces, origin, block, reach, shape)
+    kept = np.unique(keys)                                  # the blocks any face's grown box meets
+    blocks = np.stack([kept // (shape[1] * shape[2]), (kept // shape[2]) % shape[1], kept % shape[2]], axis=1)
     # a brick is kept where a corner lies within the band; the unsigned distance moves by at most the
     # half diagonal from the brick's centre, so a brick whose centre is farther is not sampled
     centre = origin + (blocks + 0.5) * block
     near, _, _ = igl.point_mesh_squared_distance(centre, vertices, faces)
-    blocks = blocks[np.abs(np.sqrt(np.asarray(near, dtype=np.float64)) - r) <= truncation + 0.5 * np.sqrt(3.0) * block
-                    + 1e-9 * block]
+    sampled = np.abs(np.sqrt(np.asarray(near, dtype=np.float64)) - r) <= truncation + 0.5 * np.sqrt(3.0) * block \
+        + 1e-9 * block
+    blocks, kept = blocks[sampled], kept[sampled]
     # each face is swept over the samples of the bricks within reach of it (:mod:`.field_raster`)
-    starts, listed = _listed(vertices, faces, origin, block, reach, shape, blocks)
+    starts, listed = _listed(keys, paired, kept)
     fn = igl.per_face_normals(vertices, faces, np.full(3, 1.0 / np.sqrt(3.0)))
     vn = igl.per_vertex_normals(vertices, faces, igl.PER_VERTEX_NORMALS_WEIGHTING_TYPE_ANGLE)
     en, _, emap = igl.per_edge_normals(vertices, faces, igl.PER_EDGE_NORMALS_WEIGHTING_TYPE_UNIFORM)
