@@ -28,11 +28,11 @@ from __future__ import annotations
 import numpy as np
 
 from ..estimation import LocalGeometry
-from ..linalg import compose, rotate, stable_order, stable_prefix, times, transform
+from ..linalg import compose, cross, rotate, stable_order, stable_prefix, times, transform
 from ..surfaces.mesh import MeshModel
 from ..surfaces.mesh_curvature import fitted_frame, quadric_curvatures, tangents
 from ..surfaces.mesh_grid import cells as _cells, first_per_cell
-from .result import Registration, cross, local_frame, rotations_from_vectors, rotations_z
+from .result import Registration, local_frame, rotations_from_vectors, rotations_z
 from .step import covariance
 
 __all__ = ["places", "curvature_gaps", "leading_places", "first_per_cell", "first_per_place", "fibonacci_sphere",

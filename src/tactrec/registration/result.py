@@ -7,9 +7,9 @@ import enum
 
 import numpy as np
 
-from ..linalg import cross, dot3, norm3, transform
+from ..linalg import dot3, norm3, transform
 
-__all__ = ["Registration", "Outcome", "local_frame", "rotations_z", "rotations_from_vectors", "cross",
+__all__ = ["Registration", "Outcome", "local_frame", "rotations_z", "rotations_from_vectors",
            "apply_poses"]
 
 

@@ -22,8 +22,7 @@ import dataclasses
 
 import numpy as np
 
-from ..linalg import transform
-from .result import cross
+from ..linalg import cross, transform
 
 __all__ = ["Criteria", "Fit", "step", "solve", "mean_distance"]
 
