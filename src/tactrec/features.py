@@ -34,7 +34,6 @@ from .estimation import LocalGeometry, estimate, noise_level
 from .estimation_patch import estimate_patch, patch_noise
 from .io.touch import TactileData
 from .outliers import kept
-from .surfaces.mesh_rings import even_arcs
 from .tip import EDGE, bends, corrected, offset, surface_curves, traceable
 
 __all__ = ["Touch", "Context", "subset"]
@@ -130,7 +129,6 @@ class Touch:
         if data.contacts is not None:              # contacts: no curvature, their stated noise
             return cls(data, contact_geometry(data.contacts), 1.0, data.contacts.noise)
         if data.patch is not None:                 # a patch: its own fit and noise (:mod:`.estimation_patch`)
-            data = dataclasses.replace(data, curves=even_arcs(data.curves, data.contact, data.units))
             noise = patch_noise(data.patch)
             geometry = estimate_patch(data, noise)
             return cls(data, geometry, 1.0, noise).with_estimate(geometry)

@@ -16,7 +16,9 @@ lies a height ``h(s, theta)`` over the tangent plane.  Per arc, ``h / s`` in the
 A mesh's places (its vertices thinned to one a cell :data:`CELL_MM` across) are read on
 :data:`ANGLES` sections each (:func:`tactrec.surfaces.section_walk.section_heights`) at the arcs
 :data:`ARCS_MM`, in millimetres whatever the model's units, so that the features of models in
-different units and of a touch compare.  A touch is read at the arcs its curves reach.
+different units and of a touch compare.  A touch is read at the arcs its curves reach; a patch's
+spokes only at those every half of them reaches, since a map's rows and columns outreach its
+diagonals and a ring read in some directions alone does not fix its harmonic.
 """
 
 from __future__ import annotations
@@ -29,7 +31,7 @@ from ..linalg import dot3, lstsq, norm3
 from .mesh_grid import first_per_cell
 from ..units import conversion
 
-__all__ = ["PlaceRings", "model_rings", "touch_rings", "touch_ring_noise", "even_arcs", "ARCS_MM", "ANGLES", "CELL_MM", "FEATURES", "ENDED"]
+__all__ = ["PlaceRings", "model_rings", "touch_rings", "touch_ring_noise", "ARCS_MM", "ANGLES", "CELL_MM", "FEATURES", "ENDED"]
 
 #: arc lengths (mm) the rings are read at: a P3 touch's curves reach 12 mm each way
 ARCS_MM = (3.0, 6.0, 9.0, 11.0)
@@ -147,7 +149,8 @@ def touch_ring_noise(touch, sign: int) -> float:
 
 def _touch_samples(touch, sign: int) -> list[tuple[np.ndarray, np.ndarray]]:
     """Per arc of :data:`ARCS_MM`, the directions and ``h / s`` of the touch's curves at that arc from
-    the contact (each half of each curve that reaches it)."""
+    the contact (each half of each curve that reaches it; of a patch's spokes, none where some half
+    does not)."""
     t = touch.in_units(conversion(touch.data.units, "mm"))
     s = t.on_surface(sign)
     g = s.geometry if s is not t else t.oriented(sign)
@@ -165,11 +168,12 @@ def _touch_samples(touch, sign: int) -> list[tuple[np.ndarray, np.ndarray]]:
             arc = np.concatenate([[0.0], np.cumsum(norm3(np.diff(half, axis=0)))])
             arc += norm3(half[0] - c)
             rays.append((half, arc))
+    even = min((arc[-1] for _, arc in rays), default=0.0) if touch.data.patch is not None else np.inf
     out = []
     for s_mm in ARCS_MM:
         theta, values = [], []
         for half, arc in rays:
-            if arc[-1] < s_mm:
+            if arc[-1] < s_mm or s_mm > even:
                 continue
             x = np.array([np.interp(s_mm, arc, half[:, i]) for i in range(3)]) - c
             h = float(dot3(x, n))
@@ -178,25 +182,3 @@ def _touch_samples(touch, sign: int) -> list[tuple[np.ndarray, np.ndarray]]:
             values.append(h / s_mm)
         out.append((np.array(theta), np.array(values)))
     return out
-
-
-def even_arcs(curves, contact: np.ndarray, units: str | None) -> tuple[np.ndarray, ...]:
-    """``curves`` through ``contact`` (data units ``units``) cut short of the first of :data:`ARCS_MM`
-    that not every half-curve reaches (by arc length from the contact): each ring is then read in
-    every direction or in none.  A ring read in only some directions does not fix its harmonic (a
-    patch's row and column reach farther than its diagonals).  A half that is empty (a one-sided
-    curve) does not count; ``curves`` as they are where every half reaches the same arcs."""
-    c = np.asarray(contact, dtype=np.float64)
-    arcs = np.asarray(ARCS_MM) * conversion("mm", units)
-    curves = [np.asarray(x, dtype=np.float64) for x in curves]
-    lengths, reaches = [], []
-    for curve in curves:
-        k0 = int(np.argmin(norm3(curve - c)))
-        steps = np.concatenate([[0.0], np.cumsum(norm3(np.diff(curve, axis=0)))])
-        arc = np.abs(steps - steps[k0]) + norm3(curve[k0] - c)       # along the curve from the contact
-        lengths.append(arc)
-        reaches += [float(arc[half].max()) for half in (slice(0, k0), slice(k0 + 1, None)) if len(arc[half])]
-    beyond = arcs[arcs > min(reaches)] if reaches else arcs[:0]
-    if not len(beyond) or max(reaches) < beyond[0]:
-        return tuple(curves)
-    return tuple(curve[arc < beyond[0]] for curve, arc in zip(curves, lengths))
