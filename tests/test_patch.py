@@ -55,6 +55,31 @@ def test_a_patch_gives_the_known_normal_and_curvatures(sphere, cylinder):
                     assert abs(touch.noise - noise) < 0.25 * noise, touch.noise
 
 
+def test_a_patch_is_scored_as_far_as_it_reaches_and_its_rings_read_evenly(sphere):
+    """A noise-free 10 mm map of a sphere of radius 33 mm, in a random sensor frame: its rows and
+    columns reach farther than its diagonals, and the pose is scored on all of them, while the place
+    index reads the sphere's rings (``h / s`` of ``-R (1 - cos(s / R))``, no harmonic) only at the arcs
+    every half of every diameter reaches, none beyond."""
+    from tactrec.surfaces.mesh_rings import ARCS_MM, touch_rings
+
+    data = simulate_random_touch(sphere, rng=np.random.default_rng(5), maker=simulate_patch, radius=10.0)
+    touch = Touch.from_data(data)
+    c = touch.geometry.contact
+    middles = [int(np.argmin(np.linalg.norm(curve - c, axis=1))) for curve in touch.curves]
+    reaches = [float(np.max(np.linalg.norm(half - c, axis=1)))
+               for curve, k in zip(touch.curves, middles) for half in (curve[:k + 1], curve[k:])]
+    assert max(reaches) > 9.5 and min(reaches) < 9.0, reaches          # rows and columns outreach diagonals
+    assert touch.radius > 9.5                                           # every recorded point is scored
+    rings = touch_rings(touch, 1)
+    even = min(reaches)
+    read = np.array([s <= even for s in ARCS_MM])
+    assert read[:2].all() and np.isnan(rings[:len(ARCS_MM)][~read]).all(), (even, rings)
+    s = np.asarray(ARCS_MM)[read]
+    sphere_h = -33.0 * (1.0 - np.cos(s / 33.0)) / s
+    assert np.allclose(rings[:len(ARCS_MM)][read], sphere_h, rtol=0.05), (rings, sphere_h)
+    assert np.all(np.abs(rings[len(ARCS_MM):][read]) < 0.002), rings
+
+
 def test_a_patch_file_round_trips_and_reads_as_points(tmp_path, sphere):
     """A simulated height map saved and loaded gives the same points and spokes to the bit; its points
     given as a point patch (with the sphere's outward normals, then without) give the same estimate

@@ -31,7 +31,8 @@ from ..linalg import dot3, lstsq, norm3
 from .mesh_grid import first_per_cell
 from ..units import conversion
 
-__all__ = ["PlaceRings", "model_rings", "touch_rings", "touch_ring_noise", "ARCS_MM", "ANGLES", "CELL_MM", "FEATURES", "ENDED"]
+__all__ = ["PlaceRings", "model_rings", "touch_rings", "touch_ring_noise", "ARCS_MM", "ANGLES", "CELL_MM", "FEATURES",
+           "ENDED"]
 
 #: arc lengths (mm) the rings are read at: a P3 touch's curves reach 12 mm each way
 ARCS_MM = (3.0, 6.0, 9.0, 11.0)
