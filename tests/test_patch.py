@@ -128,6 +128,23 @@ def test_bad_patches_get_one_line(tmp_path, capsys):
         "--patch")
 
 
+def test_a_simulated_ray_stops_at_the_surface_not_at_a_sign_far_from_it():
+    """A ray down onto the plane z = 0 of a model whose signed distance flips sign for a moment 5 mm above
+    it (as a mesh's does far from it, signed by the nearest face beside a concave edge): the pixel's
+    depth is the plane's, 10 mm, not the flip's."""
+    from tactrec.simulation import _first_hits
+
+    class Plane:
+        def planes(self, x):
+            z = np.asarray(x)[..., 2]
+            flip = (z > 4.9) & (z < 5.05)
+            return np.where(flip, -z, z), None
+
+    origins = np.array([[0.0, 0.0, 10.0], [1.0, 2.0, 10.0]])
+    depth = _first_hits(Plane(), origins, np.array([0.0, 0.0, -1.0]), 12.0, 0.1)
+    assert np.allclose(depth, 10.0, atol=1e-6), depth
+
+
 def test_simulate_patch_writes_a_height_map(tmp_path, capsys):
     """``simulate --patch 3`` writes a height map of about 400 pixels that ``load_touch`` reads; ``--blur``
     smooths the surface the gel sees (the map moves, but by less than the sag it smooths: 0.05 mm on

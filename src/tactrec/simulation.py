@@ -30,6 +30,9 @@ __all__ = ["simulate_touch", "simulate_random_touch", "random_rigid_motion", "sp
 
 #: the pixels a simulated patch holds by default (its pitch follows from its radius)
 PATCH_POINTS = 400
+#: the most a model's signed distance changes per unit along a ray (a distance's 1, a trilinear field's
+#: reading up to sqrt(3), rounded up)
+LIPSCHITZ = 2.0
 
 
 def random_rigid_motion(rng, *, extent: float) -> tuple[np.ndarray, np.ndarray]:
@@ -226,12 +229,15 @@ def _first_hits(model, origins: np.ndarray, direction: np.ndarray, length: float
     """How far each ray ``origins (m, 3) + t direction`` runs to its first crossing into the model
     (its signed distance, :meth:`~tactrec.surfaces.base.SurfaceModel.planes`, turning from positive to
     not), within ``length``: stepped every ``step``, then bisected; NaN where it never crosses or
-    starts inside."""
+    starts inside.  A distance changes by at most the step between two samples a step apart (it is
+    1-Lipschitz; :data:`LIPSCHITZ` allows for a sampled field's reading): a larger jump across zero is
+    no surface but a sign the model leaves unsure far from it (a mesh's, signed by its nearest face
+    beside a concave edge), and the ray goes on through it."""
     t = np.arange(0.0, length + step, step)
     values = np.stack([model.planes(origins + ti * direction)[0] for ti in t], axis=1)     # (m, len(t))
-    inside = values <= 0
-    first = np.argmax(inside, axis=1)
-    ok = inside.any(axis=1) & (first > 0)
+    crossing = (values[:, :-1] > 0) & (values[:, 1:] <= 0) & (values[:, :-1] - values[:, 1:] <= LIPSCHITZ * step)
+    first = np.argmax(crossing, axis=1) + 1
+    ok = crossing.any(axis=1) & (values[:, 0] > 0)
     lo, hi = np.where(ok, t[np.maximum(first - 1, 0)], np.nan), np.where(ok, t[first], np.nan)
     for _ in range(40):
         mid = 0.5 * (lo + hi)
