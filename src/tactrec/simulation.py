@@ -238,7 +238,7 @@ def _first_hits(model, origins: np.ndarray, direction: np.ndarray, length: float
     crossing = (values[:, :-1] > 0) & (values[:, 1:] <= 0) & (values[:, :-1] - values[:, 1:] <= LIPSCHITZ * step)
     first = np.argmax(crossing, axis=1) + 1
     ok = crossing.any(axis=1) & (values[:, 0] > 0)
-    lo, hi = np.where(ok, t[np.maximum(first - 1, 0)], np.nan), np.where(ok, t[first], np.nan)
+    lo, hi = np.where(ok, t[first - 1], np.nan), np.where(ok, t[first], np.nan)
     for _ in range(40):
         mid = 0.5 * (lo + hi)
         out = np.zeros(len(mid), dtype=bool)
