@@ -25,8 +25,10 @@ Per model the search (:func:`contact_stage`):
    share ``a``'s place with those matching ``a`` and ``c``, keeps the joins
    whose third side matches, and poses each (:data:`CHUNK` at a time);
 3. screens every pose on the distance field by all contacts and their
-   normals (mean truncated distance, :func:`tactrec.engine.kernels.field_best`),
-   gives the best :data:`FIELD_KEEP` :data:`FIELD_STEPS` steps on the field
+   normals (mean truncated distance, in the same compiled pass that poses
+   them, :func:`tactrec.engine.kernels.triangle_screen`; a pose's sum stops
+   once it can no longer be among the best :data:`FIELD_KEEP`), gives the
+   best :data:`FIELD_KEEP` :data:`FIELD_STEPS` steps on the field
    (:func:`~tactrec.engine.kernels.field_refine`) and refines the best
    :data:`KEEP` of those on exact distances
    (:func:`tactrec.registration.solver.solve`).  A normal takes part in
@@ -182,11 +184,17 @@ def _frames(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
     return np.stack([e1, np.cross(e3, e1), e3], axis=-1)
 
 
-def _triangle_poses(P, N, D, x, normals, sd, tri, tol):
+def _triangle_screen(field, P, N, D, x, xa, normals, sd, tri, tol):
     """Every pose putting the contacts ``tri = (a, b, c)`` of ``x`` on a triangle of places with the same
-    sides (within ``tol``; ``D``, the places' distances) and normals alike (:func:`_pairs`), in parts of
-    about :data:`CHUNK` poses (so that a model whose places hold millions of such triangles is screened
-    in bounded memory): yields ``R (h, 3, 3), t (h, 3)``."""
+    sides (within ``tol``; ``D``, the places' distances) and normals alike (:func:`_pairs`), screened on
+    ``field`` by the points ``xa`` (:func:`tangent_points`) in parts of about :data:`CHUNK` triangles (so
+    that a model whose places hold millions of such triangles is screened in bounded memory and compiled
+    code, :func:`tactrec.engine.kernels.triangle_screen`).  Once :data:`FIELD_KEEP` poses are held, a
+    pose's sum stops past the worst of them, which it can then no longer displace.  Returns the best
+    :data:`FIELD_KEEP` poses (the first of equal scores) ``R (h, 3, 3), t (h, 3), score (h,)`` and how
+    many triangles were posed."""
+    from .kernels import triangle_poses, triangle_screen
+
     a, b, c = tri
 
     def side(i, j):
@@ -196,32 +204,41 @@ def _triangle_poses(P, N, D, x, normals, sd, tri, tol):
                 (normals[k], float(_angle(normals[k], u)), ANGLE * float(sd[k])) for k in (i, j)]
         return _pairs(P, N, D, length, tol, *ends)
 
+    none = np.zeros(0, dtype=np.int64)
+    held, score, tried = (none, none, none), np.zeros(0, dtype=np.float32), 0
     v1, w1 = side(a, b)
     v2, w2 = side(a, c)
-    if not len(v1) or not len(v2):
-        return
-    # join the pairs that share a's place: each (v, w) of ab with each (v, u) of ac
-    o1, o2 = np.argsort(v1, kind="stable"), np.argsort(v2, kind="stable")
-    v1, w1, v2, w2 = v1[o1], w1[o1], v2[o2], w2[o2]
-    first = np.searchsorted(v2, v1, side="left")
-    count = np.searchsorted(v2, v1, side="right") - first
-    ends = np.cumsum(count)
-    bc = float(np.linalg.norm(x[c] - x[b]))
-    F_data = _frames(x[a], x[b], x[c])
-    lo = 0
-    while lo < len(v1):
-        hi = max(lo + 1, int(np.searchsorted(ends, (ends[lo - 1] if lo else 0) + CHUNK, side="right")))
-        part = np.arange(lo, hi)
-        rows = np.repeat(part, count[part])
-        cols = np.repeat(first[part] - (ends[part] - count[part]), count[part]) + \
-            np.arange(ends[lo - 1] if lo else 0, ends[hi - 1])
-        va, wb, wc = v1[rows], w1[rows], w2[cols]
-        keep = np.abs(np.linalg.norm(P[wc] - P[wb], axis=1) - bc) <= tol
-        va, wb, wc = va[keep], wb[keep], wc[keep]
-        lo = hi
-        if len(va):
-            R = np.einsum("hij,kj->hik", _frames(P[va], P[wb], P[wc]), F_data)      # element-wise: no BLAS
-            yield R, P[va] - np.einsum("hij,j->hi", R, x[a])
+    if len(v1) and len(v2):
+        # join the pairs that share a's place: each (v, w) of ab with each (v, u) of ac
+        o1, o2 = np.argsort(v1, kind="stable"), np.argsort(v2, kind="stable")
+        v1, w1, v2, w2 = v1[o1], w1[o1], v2[o2], w2[o2]
+        first = np.searchsorted(v2, v1, side="left")
+        count = np.searchsorted(v2, v1, side="right") - first
+        ends = np.cumsum(count)
+        bc = float(np.linalg.norm(x[c] - x[b]))
+        data_frame = np.ascontiguousarray(_frames(x[a], x[b], x[c]))
+        # the triangle's own contacts last: every pose puts them on the surface, so the others decide early
+        rest = np.ones(len(xa), dtype=bool)
+        rest[list(tri)] = False
+        screened = np.ascontiguousarray(np.concatenate([xa[rest], xa[list(tri)]]))
+        lo = 0
+        while lo < len(v1):
+            hi = max(lo + 1, int(np.searchsorted(ends, (ends[lo - 1] if lo else 0) + CHUNK, side="right")))
+            offset = ends[lo:hi] - count[lo:hi] - (ends[lo - 1] if lo else 0)
+            bound = float(score.max()) if len(score) == FIELD_KEEP else np.inf
+            part = triangle_screen(*field.args(), P, v1[lo:hi], w1[lo:hi], w2, first[lo:hi], count[lo:hi], offset,
+                                   bc, tol, data_frame, x[a], screened, bound)
+            tried += int(np.count_nonzero(~np.isnan(part)))
+            new = np.flatnonzero(np.isfinite(part))
+            r = np.searchsorted(offset, new, side="right") - 1 + lo     # the pair of ab each new one joins
+            found = (v1[r], w1[r], w2[first[r] + new - offset[r - lo]])
+            held = tuple(np.concatenate([h, f]) for h, f in zip(held, found))
+            score = np.concatenate([score, part[new]])
+            best = stable_order(score)[:FIELD_KEEP]
+            held, score = tuple(h[best] for h in held), score[best]
+            lo = hi
+    R, t = triangle_poses(P, *held, data_frame if len(score) else np.eye(3), x[a])
+    return R, t, score, tried
 
 
 def _agree(R, surface, normals, sd) -> np.ndarray:
@@ -249,7 +266,7 @@ def contact_stage(held, indices, touch, limit: float, fit: float) -> list[Regist
     limit (data units, :func:`tangent_points`)."""
     from ..registration.solver import Criteria, solve
     from ..units import conversion
-    from .kernels import field_best, field_refine
+    from .kernels import field_refine
 
     out = []
     for i in indices:
@@ -269,17 +286,11 @@ def contact_stage(held, indices, touch, limit: float, fit: float) -> list[Regist
         tol = 2.0 * reach + SIGMAS * np.sqrt(2.0) * touch.noise * scale
         field, tried, found = model.distance_field, 0, None
         for tri in triangles(x, TRIANGLES):
-            R, t, score = np.zeros((0, 3, 3)), np.zeros((0, 3)), np.zeros(0)
-            for Rc, tc in _triangle_poses(P, N, D, x, c.normals, c.normal_sd, tri, tol):
-                tried += len(Rc)
-                sc, _ = field_best(*field.args(), np.ascontiguousarray(Rc), np.ascontiguousarray(tc), xa[None])
-                R, t, score = np.concatenate([R, Rc]), np.concatenate([t, tc]), np.concatenate([score, sc])
-                best = stable_order(score)[:FIELD_KEEP]
-                R, t, score = R[best], t[best], score[best]
+            R, t, score, posed = _triangle_screen(field, P, N, D, x, xa, c.normals, c.normal_sd, tri, tol)
+            tried += posed
             if not len(R):
                 continue
-            R, t, score = field_refine(*field.args(), np.ascontiguousarray(R), np.ascontiguousarray(t), xa,
-                                       FIELD_STEPS)
+            R, t, score = field_refine(*field.args(), R, t, xa, FIELD_STEPS)
             best = stable_order(score)[:KEEP]
             refined = solve(model, R[best], t[best], xa, Criteria(STEPS))
             distance, surface = model.planes(transform(refined.R, refined.t, x))           # the contacts' own

@@ -17,7 +17,7 @@ from ..compiled import fork_safe
 from ..registration.step import _add_plane, _damped_solve, _turn
 from ..surfaces.field_kernels import BRICK, _sample, _sample_gradient
 
-__all__ = ["screen_rotations", "field_best", "field_refine", "warm"]
+__all__ = ["screen_rotations", "field_best", "field_refine", "triangle_screen", "triangle_poses", "warm"]
 
 fork_safe()
 
@@ -125,6 +125,73 @@ def field_refine(index, bricks, origin, inv_h, quantum, truncation, shift, R, t,
     return Ro, to, score
 
 
+@njit(cache=True, nogil=True)
+def _triangle_pose(P, va, wb, wc, data_frame, xa, R, t):
+    """Into ``R (3, 3), t (3,)``: the pose moving the data triangle whose frame is ``data_frame``
+    (columns: along ``ab``, in the plane towards ``c``, the plane's normal) and whose first corner is
+    ``xa (3,)`` onto the places ``P[va], P[wb], P[wc]``, frame onto frame."""
+    e1 = P[wb] - P[va]
+    e1 = e1 / np.sqrt(e1[0] * e1[0] + e1[1] * e1[1] + e1[2] * e1[2])
+    f = P[wc] - P[va]
+    e3 = np.array([e1[1] * f[2] - e1[2] * f[1], e1[2] * f[0] - e1[0] * f[2], e1[0] * f[1] - e1[1] * f[0]])
+    e3 = e3 / max(np.sqrt(e3[0] * e3[0] + e3[1] * e3[1] + e3[2] * e3[2]), 1e-300)
+    e2 = np.array([e3[1] * e1[2] - e3[2] * e1[1], e3[2] * e1[0] - e3[0] * e1[2], e3[0] * e1[1] - e3[1] * e1[0]])
+    for i in range(3):
+        for k in range(3):
+            R[i, k] = e1[i] * data_frame[k, 0] + e2[i] * data_frame[k, 1] + e3[i] * data_frame[k, 2]
+    for i in range(3):
+        t[i] = P[va, i] - (R[i, 0] * xa[0] + R[i, 1] * xa[1] + R[i, 2] * xa[2])
+
+
+@njit(cache=True, parallel=True)
+def triangle_screen(index, bricks, origin, inv_h, quantum, truncation, shift, P, v1, w1, w2, first, count, offset,
+                    bc, tol, data_frame, xa, x, bound):
+    """The screen of contacts: each triangle of places ``(v1[r], w1[r], w2[first[r] + j])``, ``j <
+    count[r]`` (pairs of ``ab`` joined to the pairs of ``ac`` that share ``a``'s place), posed by
+    :func:`_triangle_pose` and scored by the mean truncated distance of the points ``x (m, 3)`` on the
+    field.  Returns ``(sum(count),) float32`` at ``offset[r] + j``: NaN where the third side is not
+    ``bc`` within ``tol`` (no pose), inf where the sum passes ``bound`` times ``m`` (its terms are
+    non-negative, so such a pose's mean is past ``bound``)."""
+    rows = v1.shape[0]
+    m = x.shape[0]
+    out = np.empty(offset[rows - 1] + count[rows - 1] if rows else 0, dtype=np.float32)
+    cap = bound * m
+    for r in prange(rows):
+        R = np.empty((3, 3))
+        t = np.empty(3)
+        for j in range(count[r]):
+            wc = w2[first[r] + j]
+            dx = P[wc, 0] - P[w1[r], 0]
+            dy = P[wc, 1] - P[w1[r], 1]
+            dz = P[wc, 2] - P[w1[r], 2]
+            if abs(np.sqrt(dx * dx + dy * dy + dz * dz) - bc) > tol:
+                out[offset[r] + j] = np.nan
+                continue
+            _triangle_pose(P, v1[r], w1[r], wc, data_frame, xa, R, t)
+            total = 0.0
+            for k in range(m):
+                y0 = R[0, 0] * x[k, 0] + R[0, 1] * x[k, 1] + R[0, 2] * x[k, 2] + t[0]
+                y1 = R[1, 0] * x[k, 0] + R[1, 1] * x[k, 1] + R[1, 2] * x[k, 2] + t[1]
+                y2 = R[2, 0] * x[k, 0] + R[2, 1] * x[k, 1] + R[2, 2] * x[k, 2] + t[2]
+                total += abs(_sample(index, bricks, origin, inv_h, quantum, truncation, shift, y0, y1, y2))
+                if total > cap:
+                    break
+            out[offset[r] + j] = np.inf if total > cap else total / m
+    return out
+
+
+@njit(cache=True)
+def triangle_poses(P, va, wb, wc, data_frame, xa):
+    """The poses :func:`triangle_screen` scored, of the triangles of places ``(va, wb, wc)`` each
+    ``(h,)``: ``R (h, 3, 3), t (h, 3)``, the same bits."""
+    h = va.shape[0]
+    R = np.empty((h, 3, 3))
+    t = np.empty((h, 3))
+    for i in range(h):
+        _triangle_pose(P, va[i], wb[i], wc[i], data_frame, xa, R[i], t[i])
+    return R, t
+
+
 def warm() -> None:
     """Load every kernel's compiled code (from numba's cache, or compiling it) by calling each once on
     a tiny empty field, with the argument types and layouts a search passes."""
@@ -142,6 +209,9 @@ def warm() -> None:
     turned = screen_rotations(points, 2)
     field_best(*field, eye, points, turned)
     field_refine(*field, eye, points, points, 1)
+    one = np.zeros(1, dtype=np.int64)
+    triangle_screen(*field, points, one, one, one, one, one, one, 1.0, 1.0, np.eye(3), points[0], points, np.inf)
+    triangle_poses(points, one, one, one, np.eye(3), points[0])
     plane_step(eye, points, np.zeros((2, 2, 3)), np.zeros((2, 2, 3)), np.zeros((2, 2)))
     jacobian(points, points)
     normal_matrix(points, points)
