@@ -501,7 +501,7 @@ def test_bench_sweep_options_belong_to_their_benchmarks(tmp_path, capsys):
     bad(capsys, ["bench", "multi-touch", "--sets", "hard-10,soft", "--out", tmp_path / "bench"], "--sets",
         "unknown set 'soft'")
     bad(capsys, ["bench", "calibration", "--strategies", "next", "--out", tmp_path / "bench"], "calibration",
-        "--strategies applies to multi-touch only")
+        "--strategies applies to multi-touch and contacts only")
     bad(capsys, ["bench", "multi-touch", "--strategies", "next,greedy", "--out", tmp_path / "bench"],
         "--strategies", "unknown strategy 'greedy'")
     assert files_in(tmp_path) == []

@@ -147,3 +147,43 @@ def test_the_contacts_screen_keeps_what_scoring_every_pose_keeps(meshes, monkeyp
             for a, b in zip(full[:3], cut[:3]):
                 np.testing.assert_array_equal(a, b)
             assert len(full[2]) == 40
+
+
+def test_next_sends_a_session_of_contacts_a_contact(meshes):
+    """A session of contacts on the capsule, the brick or the ring (random ones until some model is posed)
+    is sent a contact, not curves to trace: an approach line that starts outside the object.  The probe
+    follows two such lines on the true object, recording a contact where one meets it or a line that met
+    nothing; most meet it, and each session ends on the right model."""
+    from tactrec.bench.contacts import followed
+    from tactrec.io.contacts import Contacts
+    from tactrec.io.session import MissedLine
+    from tactrec.io.touch import TactileData
+    from tactrec.session.result import Hypothesis
+
+    meshes = meshes[1:]
+    right = met = 0
+    with Recognizer(meshes) as recognizer:
+        for k, entry in enumerate(meshes):
+            data = simulate_contacts(entry.model, 6, noise=0.05, normal_sd=3.0, rng=np.random.default_rng([13, k]))
+            truth = Hypothesis("truth", *truth_pose(data), 1.0, 0.0, np.zeros(0), ())
+            session, c = recognizer.session(), data.contacts
+            for i in range(6):                          # at random until some model is posed
+                one = Contacts(c.points[i:i + 1], c.normals[i:i + 1], c.normal_sd[i:i + 1], c.point_sd[i:i + 1])
+                if session.add(TactileData.from_contacts(one, units="mm", source=f"contact {i + 1}")).ranking:
+                    break
+            for i in range(2):
+                proposal = session.next(radius=40.0, rng=k)
+                if proposal.contact is None:
+                    break
+                out = proposal.to_json()
+                assert "directions" not in out and out["approach"]["length"] > 0
+                start = truth.rotation @ proposal.approach.start + truth.translation
+                assert entry.model.planes(start[None])[0][0] > 0            # starts outside the object
+                found = followed(proposal, entry.model, truth, 0.05, 3.0, np.random.default_rng([17, k, i]))
+                if isinstance(found, MissedLine):
+                    session.add_miss(found)
+                else:
+                    met += 1
+                    session.add(TactileData.from_contacts(found, units="mm", source=f"next {i + 1}"))
+            right += session.result.best == entry.name
+    assert right == 3 and met >= 4, (right, met)

@@ -359,7 +359,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--radii", type=_positives, metavar="MM,...", help="patch: the patches' radii (default 2,4,6,10)")
     p.add_argument("--blur", type=float, metavar="MM", help="patch: the gel's blur sigma (default 0)")
     p.add_argument("--strategies", type=lambda text: text.split(","), metavar="NAME,...",
-                   help="multi-touch: which next-touch strategies to run (random, next; default both)")
+                   help="where each touch goes (random, next): multi-touch both by default, contacts random")
     p.add_argument("--settings", type=lambda text: text.split(","), metavar="NAME,...",
                    help="sensor: which settings to run besides clean ('tip 1 mm', 'outliers 3%%', ...; default all)")
     p.add_argument("--against", metavar="FILE", default=None,

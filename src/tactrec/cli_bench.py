@@ -91,11 +91,13 @@ def cmd_bench(args) -> int:
                              args.name)
         extra["sets"] = _known(args.sets, known, "set", "--sets", args.name)
     if args.strategies is not None:
+        from .bench.contacts import STRATEGIES as CONTACT_STRATEGIES
         from .bench.multi_touch import STRATEGIES
 
-        if args.name != "multi-touch":
-            raise InputError("--strategies applies to multi-touch only", args.name)
-        extra["strategies"] = _known(args.strategies, STRATEGIES, "strategy", "--strategies", args.name)
+        known = {"multi-touch": STRATEGIES, "contacts": CONTACT_STRATEGIES}.get(args.name)
+        if known is None:
+            raise InputError("--strategies applies to multi-touch and contacts only", args.name)
+        extra["strategies"] = _known(args.strategies, known, "strategy", "--strategies", args.name)
     if args.settings is not None:
         from .bench.sensor import SETTINGS
 

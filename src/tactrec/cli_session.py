@@ -94,7 +94,7 @@ def cmd_next(args, *, open_models, options, warn) -> int:
     line = proposal.approach
     print(f"{args.session}: approach from ({fmt(line.start)}) along ({fmt(line.direction)}) for {line.length:.4g}; "
           f"contact expected at ({fmt(proposal.contact)}); expected gain {proposal.gain:.3f} bits")
-    for i, d in enumerate(proposal.directions, start=1):
+    for i, d in enumerate([] if proposal.directions is None else proposal.directions, start=1):
         print(f"  curve {i} along ({fmt(d)})")
     print(f"  separates: {hyps}")
     return 0

@@ -3,7 +3,8 @@
 A touch whose approach line met nothing (docs/formats.md, ``"missed"``) says the
 object's surface does not cross that line.  Under a hypothesis (a model at
 its joint pose), the line is sampled every half of the touches' median point
-spacing, mapped into the model's frame, and its deepest point inside the
+spacing (single contacts have none: :func:`line_step`), mapped into the
+model's frame, and its deepest point inside the
 model (the most negative signed distance) is how far the line cuts into the
 surface.  That depth, against the fit limit of the touches the pose was
 fitted to (the points-weighted mean of their
@@ -22,7 +23,16 @@ import numpy as np
 
 from .probability import CONSISTENT_SE, residuals
 
-__all__ = ["crossing", "cut_depth", "depth_excess", "miss_excess", "first_hit"]
+__all__ = ["crossing", "cut_depth", "depth_excess", "miss_excess", "first_hit", "line_step", "SAMPLES"]
+
+#: points a line is sampled at where the touches have no point spacing to sample it by (single contacts)
+SAMPLES = 400
+
+
+def line_step(spacing: float, length: float) -> float:
+    """The step a line ``length`` long is sampled at for touches whose points lie ``spacing`` apart: that,
+    or where they have none (a session of single contacts), ``length / SAMPLES``."""
+    return float(spacing) if spacing > 0 else float(length) / SAMPLES
 
 
 def crossing(model, hypothesis, line, step: float) -> tuple[np.ndarray | None, float]:

@@ -26,7 +26,7 @@ from .surfaces.base import SurfaceModel
 
 __all__ = ["simulate_touch", "simulate_random_touch", "random_rigid_motion", "spread_vertices", "sensor_to_world",
            "truth_pose", "truth_contact",
-           "simulate_world_touch", "simulate_patch", "simulate_contacts", "PATCH_POINTS"]
+           "simulate_world_touch", "simulate_patch", "simulate_contacts", "perturbed", "PATCH_POINTS"]
 
 #: the pixels a simulated patch holds by default (its pitch follows from its radius)
 PATCH_POINTS = 400
@@ -304,6 +304,20 @@ def simulate_patch(model: SurfaceModel, site, *, radius: float, pitch: float | N
                                   source=source)
 
 
+def perturbed(points: np.ndarray, normals: np.ndarray, *, noise: float, normal_sd: float, rng):
+    """Contacts at ``points (n, 3)`` with outward unit ``normals (n, 3)`` as a sensor records them: Gaussian
+    noise of sigma ``noise`` on every coordinate, each normal tilted by a Gaussian of ``normal_sd``
+    degrees per tangent direction.  Returns ``(points, normals)``."""
+    seen = points + rng.normal(0.0, noise, size=points.shape) if noise > 0 else points
+    tilt = normals.copy()
+    if normal_sd > 0:
+        d1, d2 = tangents(normals)
+        a, b = (np.tan(np.deg2rad(rng.normal(0.0, normal_sd, size=len(points))))[:, None] for _ in range(2))
+        tilt = normals + a * d1 + b * d2
+        tilt /= np.linalg.norm(tilt, axis=1, keepdims=True)
+    return seen, tilt
+
+
 def simulate_contacts(model: SurfaceModel, count: int, *, noise: float = 0.0, normal_sd: float = 0.0,
                       sensor_frame: bool = True, units: str | None = None, rng=None) -> TactileData:
     """``count`` single contacts spread over ``model``: on a mesh, points uniform over its area (the
@@ -324,13 +338,7 @@ def simulate_contacts(model: SurfaceModel, count: int, *, noise: float = 0.0, no
         frames = [model.site_frame(s) for s in model.random_sites(count, rng=rng)]
         points = np.array([f.point for f in frames])
         normals = np.array([f.normal for f in frames])
-    seen = points + rng.normal(0.0, noise, size=points.shape) if noise > 0 else points
-    tilt = normals.copy()
-    if normal_sd > 0:
-        d1, d2 = tangents(normals)
-        a, b = (np.tan(np.deg2rad(rng.normal(0.0, normal_sd, size=count)))[:, None] for _ in range(2))
-        tilt = normals + a * d1 + b * d2
-        tilt /= np.linalg.norm(tilt, axis=1, keepdims=True)
+    seen, tilt = perturbed(points, normals, noise=noise, normal_sd=normal_sd, rng=rng)
     R, t = (random_rigid_motion(rng, extent=model.size) if sensor_frame else (np.eye(3), np.zeros(3)))
     items = []
     for p, n in zip(times(seen, R.T) + t, times(tilt, R.T)):

@@ -15,9 +15,19 @@ Reported: how many sessions are right at >= 0.95 within 12 contacts (the
 issue's target: 95 of 100), from a count on which every later answer is too,
 the median of that count, how many answers along the way were sure (>= 0.95)
 and wrong, and
-the seconds an add takes (median, p95, max).  Contacts are placed at random;
-``next``'s choice of where to touch is not measured here (it proposes curves
-to trace, not contacts).
+the seconds an add takes (median, p95, max).
+
+Two strategies (``--strategies``): ``random``, every contact at a random
+place; ``next``, each where :meth:`tactrec.session.Session.next` proposes
+once the session has a hypothesis (from the third contact on), else at
+random: the probe follows the proposed approach line on the true object
+(within :data:`~tactrec.bench.multi_touch.RADIUS` of an earlier contact, as
+the multi-touch bench's) and records a contact, with the same noise, where
+it first meets the surface, or a line that met nothing
+(:meth:`~tactrec.session.Session.add_miss`).  Each approach is one of the
+:data:`CONTACTS` steps, whether it met the object or not.  Where nothing is
+proposed (one hypothesis holds the probability) or the line starts inside the
+object, the next random contact is taken.
 """
 
 from __future__ import annotations
@@ -31,10 +41,13 @@ from .common import CORE_SOURCES, database, instance_rng, recognizer, run_parall
     write_json
 from .sensor import _quantiles
 
-__all__ = ["run", "SETS", "CONTACTS", "NOISE", "NORMAL_SD", "SURE", "TARGET"]
+__all__ = ["run", "SETS", "STRATEGIES", "CONTACTS", "NOISE", "NORMAL_SD", "SURE", "TARGET"]
 
 #: the sets of scans sessions may touch (``--sets``); the first is the default
 SETS = ("fig11", "other")
+
+#: where each contact is placed (``--strategies``); the first is the default
+STRATEGIES = ("random", "next")
 
 #: contacts a session adds at most
 CONTACTS = 12
@@ -47,9 +60,11 @@ SURE = 0.95
 TARGET = 95.0
 
 
-def _code_hash() -> str:
+def _code_hash(strategy: str) -> str:
+    """The sources a strategy's sessions run: random places never ask for a proposal."""
+    proposal = ("proposal", "missed.py") if strategy == "next" else ()
     return sources_hash(*CORE_SOURCES, "simulation.py", "engine/contacts.py", "io/contacts.py", "session",
-                        "bench/contacts.py")
+                        "bench/contacts.py", *proposal)
 
 
 def _names(scans: str = SETS[0]) -> tuple[str, ...]:
@@ -59,27 +74,73 @@ def _names(scans: str = SETS[0]) -> tuple[str, ...]:
     return tuple(BUILTIN_SETS["paper-fig11"]) if scans == "fig11" else OTHER
 
 
-def _session(task) -> dict:
-    """One session of ``task = (scan index, instance, seed, noise, normal_sd, set)``."""
-    from ..io.contacts import Contacts
-    from ..io.touch import TactileData
-    from ..simulation import simulate_contacts
+def _proposed(session, model, truth, noise: float, normal_sd: float, rng):
+    """Where ``next`` sends the probe (:func:`followed`), or None where the session has no hypothesis yet."""
+    from .multi_touch import RADIUS
 
-    m, i, seed, noise, normal_sd, scans = task
+    try:
+        proposal = session.next(radius=RADIUS, rng=rng)
+    except ValueError:                                         # no hypothesis yet
+        return None
+    return followed(proposal, model, truth, noise, normal_sd, rng)
+
+
+def followed(proposal, model, truth, noise: float, normal_sd: float, rng):
+    """The probe follows ``proposal``'s approach line on the true object (``truth``, a hypothesis of
+    ``model``): the contact it records where the line first meets the surface (world frame, with the
+    noise stated), the line where it meets nothing, or None (nothing proposed, or the line starts inside
+    the object)."""
+    from ..io.contacts import Contacts
+    from ..missed import first_hit, line_step
+    from ..simulation import perturbed
+
+    line = proposal.approach
+    if proposal.contact is None or line is None:
+        return None
+    hit = first_hit(model, truth, line, line_step(0.0, line.length))
+    if hit is None:
+        return line
+    if np.array_equal(hit, line.start):
+        return None
+    x = (truth.rotation @ hit + truth.translation)[None]                               # model frame
+    seen, tilt = perturbed(x, model.planes(x)[1], noise=noise, normal_sd=normal_sd, rng=rng)
+    return Contacts((seen - truth.translation) @ truth.rotation, tilt @ truth.rotation, np.array([normal_sd]),
+                    np.array([noise]))
+
+
+def _session(task) -> dict:
+    """One session of ``task = (scan index, instance, seed, noise, normal_sd, set, strategy)``."""
+    from ..io.contacts import Contacts
+    from ..io.session import MissedLine
+    from ..io.touch import TactileData
+    from ..session.result import Hypothesis
+    from ..simulation import simulate_contacts, truth_pose
+
+    m, i, seed, noise, normal_sd, scans, strategy = task
     names = _names(scans)
     db = database(names)
     entry = db.entries[m]
     rng = instance_rng(seed, m, i)
     data = simulate_contacts(entry.model, CONTACTS, noise=noise, normal_sd=normal_sd, rng=rng)
     c = data.contacts
+    truth = Hypothesis("truth", *truth_pose(data), 1.0, 0.0, np.zeros(0), ())
+    pick = instance_rng(seed, m, i, 79)
     session = recognizer(db.entries).session()
-    steps = []
-    for k in range(len(c)):
-        one = Contacts(c.points[k:k + 1], c.normals[k:k + 1], c.normal_sd[k:k + 1], c.point_sd[k:k + 1])
-        result = session.add(TactileData.from_contacts(one, units=data.units, source=f"contact {k + 1}"))
+    steps, drawn = [], 0
+    for k in range(CONTACTS):
+        found = _proposed(session, entry.model, truth, noise, normal_sd, pick) if strategy == "next" else None
+        proposed = found is not None
+        if found is None:
+            found = Contacts(c.points[drawn:drawn + 1], c.normals[drawn:drawn + 1], c.normal_sd[drawn:drawn + 1],
+                             c.point_sd[drawn:drawn + 1])
+            drawn += 1
+        if isinstance(found, MissedLine):
+            result = session.add_miss(found)
+        else:
+            result = session.add(TactileData.from_contacts(found, units=data.units, source=f"contact {k + 1}"))
         steps.append({"best": result.best, "confidence": float(result.confidence), "unknown": float(result.unknown),
-                      "seconds": float(result.seconds)})
-    return {"model": entry.name, "instance": i, "steps": steps}
+                      "seconds": float(result.seconds), "proposed": proposed, "missed": isinstance(found, MissedLine)})
+    return {"model": entry.name, "instance": i, "strategy": strategy, "steps": steps}
 
 
 def _saved(args) -> dict:
@@ -107,21 +168,29 @@ def _summary(records: list[dict]) -> dict:
     return {"sessions": len(records), "right_sure": len(done),
             "right_sure_percent": 100.0 * len(done) / max(len(records), 1),
             "median_contacts": float(np.median(done)) if done else None,
-            "sure_wrong_answers": sure_wrong, "add_seconds": _quantiles(seconds)}
+            "sure_wrong_answers": sure_wrong, "add_seconds": _quantiles(seconds),
+            "missed": sum(bool(step.get("missed")) for rec in records for step in rec["steps"])}
 
 
 def run(*, out, instances: int = 10, seed: int = 0, jobs: int | None = None, quiet: bool = False,
-        sets=SETS[:1], **_ignored) -> dict:
-    """Run ``instances`` sessions per scan of each of ``sets``; write ``contacts.json`` and ``contacts.md``."""
+        sets=SETS[:1], strategies=STRATEGIES[:1], **_ignored) -> dict:
+    """Run ``instances`` sessions per scan of each of ``sets`` with each of ``strategies``; write
+    ``contacts.json`` and ``contacts.md``.  Each strategy's sessions are saved apart, under a hash of
+    the sources it runs (an interrupted or repeated run reuses them)."""
     out = Path(out)
+    strategies = tuple(s for s in STRATEGIES if s in strategies)
+    if not strategies:
+        raise ValueError(f"no strategy to run; known: {', '.join(STRATEGIES)}")
     per_set = {}
     for scans in sets:
-        folder = out / "contacts.parts" / scans / _code_hash()
-        folder.mkdir(parents=True, exist_ok=True)
-        tasks = [(m, i, seed, NOISE, NORMAL_SD, scans) for i in range(instances) for m in range(len(_names(scans)))]
-        records = run_parallel(_saved, [(t, folder) for t in tasks], jobs=jobs or 1, quiet=quiet,
-                               desc=f"contacts {scans}")
-        per_set[scans] = {"summary": _summary(records), "records": records}
+        for strategy in strategies:
+            folder = out / "contacts.parts" / scans / f"{strategy}-{_code_hash(strategy)}"
+            folder.mkdir(parents=True, exist_ok=True)
+            tasks = [(m, i, seed, NOISE, NORMAL_SD, scans, strategy) for i in range(instances)
+                     for m in range(len(_names(scans)))]
+            records = run_parallel(_saved, [(t, folder) for t in tasks], jobs=jobs or 1, quiet=quiet,
+                                   desc=f"contacts {scans} {strategy}")
+            per_set[f"{scans} {strategy}"] = {"summary": _summary(records), "records": records}
     table = {"benchmark": "contacts", "method": "fast", "instances": instances, "seed": seed, "noise": NOISE,
              "normal_sd": NORMAL_SD, "contacts": CONTACTS, "target": TARGET, "sets": per_set}
     out.mkdir(parents=True, exist_ok=True)
@@ -132,11 +201,12 @@ def run(*, out, instances: int = 10, seed: int = 0, jobs: int | None = None, qui
         q = "-" if s["add_seconds"] is None else "/".join(f"{x:.2f}" for x in s["add_seconds"])
         median = "-" if s["median_contacts"] is None else f"{s['median_contacts']:g}"
         rows.append(f"| {scans} | {s['sessions']} | {s['right_sure']} ({s['right_sure_percent']:.0f}%; target "
-                    f"{TARGET:g}%) | {median} | {s['sure_wrong_answers']} | {q} |")
+                    f"{TARGET:g}%) | {median} | {s['sure_wrong_answers']} | {s['missed']} | {q} |")
     table["text"] = "\n".join([
-        f"Sessions of up to {CONTACTS} contacts at random places, each scan recognised among its set; "
-        f"point noise {NOISE} mm, normals {NORMAL_SD} degrees, seed {seed}.", "",
-        "| set | sessions | right at >= 0.95 within 12 (and after) | median contacts to it | sure and wrong answers | "
-        "s an add (median/p95/max) |", "|---|---|---|---|---|---|", *rows])
+        f"Sessions of up to {CONTACTS} approaches, each scan recognised among its set; point noise {NOISE} mm, "
+        f"normals {NORMAL_SD} degrees, seed {seed}.", "",
+        "| set and strategy | sessions | right at >= 0.95 within 12 (and after) | median approaches to it | "
+        "sure and wrong answers | approaches that met nothing | s an add (median/p95/max) |",
+        "|---|---|---|---|---|---|---|", *rows])
     write_text_atomic(out / "contacts.md", table["text"])
     return table

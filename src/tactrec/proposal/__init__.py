@@ -33,7 +33,10 @@ curve is not a truth for that line.
 Gain.  At a candidate, each pose predicts the outcome: three curves through
 where the line meets its surface, in the same world directions, as the
 session's touches are (their points per curve and spacing), noise-free, or
-no contact.  If a pose that meets nothing is true, a model is weighed by its
+no contact.  A session of single contacts (:func:`contacts_only`) is sent a
+contact, not curves: each pose predicts the point where the line meets its
+surface (the line sampled at :func:`tactrec.missed.line_step`; the contact's
+normal is not counted in the gain).  If a pose that meets nothing is true, a model is weighed by its
 pose the line cuts least (:func:`tactrec.missed.cut_depth`, in the
 fit test's units as for a missed line, :mod:`tactrec.missed`).  If
 hypothesis ``i`` is true, meets the line and model ``M`` is fitted, ``M``'s pose is refitted
@@ -112,13 +115,13 @@ import numpy as np
 from ..io.session import MissedLine
 from ..linalg import times
 from ..probability import CONSISTENT_SE
-from ..missed import depth_excess
+from ..missed import depth_excess, line_step
 from .disagreement import places, touched_side
 from .gain import entropy, expected_gain, information, separation
 from .locate import fan, locate
 from .predict import Seen, outcome, to_model
 
-__all__ = ["Proposal", "propose", "leading_hypotheses", "MASS", "LEADING", "STANDOFF", "CANDIDATES"]
+__all__ = ["Proposal", "propose", "leading_hypotheses", "contacts_only", "MASS", "LEADING", "STANDOFF", "CANDIDATES"]
 
 #: the leading hypotheses of a session hold this much probability, and are at most this many
 MASS, LEADING = 0.99, 4
@@ -145,7 +148,8 @@ class Proposal:
         Where the sensor should meet the surface, and the outward normal there (approach along
         ``-normal``), under the most probable hypothesis.
     directions : (3, 3) float or None
-        Tangent directions of the curves to trace.
+        Tangent directions of the curves to trace (None for a session of single contacts: the sensor
+        records where it meets the surface).
     gain : float
         Expected information gain, bits.
     hypotheses : list of (str, float)
@@ -171,8 +175,9 @@ class Proposal:
         if self.contact is None:
             out.update(contact=None, gain=0.0, reason=self.reason)
             return out
-        out.update(contact=self.contact.tolist(), normal=self.normal.tolist(), directions=self.directions.tolist(),
-                   gain=float(self.gain))
+        out.update(contact=self.contact.tolist(), normal=self.normal.tolist(), gain=float(self.gain))
+        if self.directions is not None:
+            out["directions"] = self.directions.tolist()
         if self.approach is not None:
             out["approach"] = self.approach.to_json()
         return out
@@ -250,6 +255,12 @@ def propose(session, *, radius: float, angle: float = 60.0, candidates: int = CA
         "leading hypotheses both predict")
 
 
+def contacts_only(session) -> bool:
+    """Whether every touch ``session`` keeps is of single contacts: the next one is proposed as a contact,
+    where the approach line meets the surface, not as curves to trace."""
+    return all(session.world[i].contacts is not None for i in session.kept())
+
+
 def pose_fits(session, h) -> bool:
     """Whether hypothesis ``h``'s pose fits the touches kept as well as their noise allows and cuts
     into no line that met nothing (by the fit test, :mod:`tactrec.probability`).  The joint pose
@@ -269,6 +280,7 @@ def _located(session, leading: list, hyps: list, *, radius: float, angle: float)
     if found is None:
         return None
     contact, normal, directions, line = found
+    directions = None if contacts_only(session) else directions
     rest = max(1.0 - sum(w for _, w in hyps), 0.0)
     return Proposal(contact, normal, directions, entropy(np.array([w for _, w in hyps] + [rest])), hyps,
                     approach=line)
@@ -300,6 +312,7 @@ def _best_line(session, leading: list, weights: np.ndarray, *, radius: float, an
     sizes = [len(c) for f in session.features for c in f.curves]
     points = int(np.median(sizes))
     spacing = float(np.median([w.spacing for w in session.world]))
+    single = contacts_only(session)
     noise = float(np.median([f.noise for f in session.features]))
     sigma = max(noise, leading[0].error * np.sqrt(np.pi / 2), 1e-3 * spacing)
     limit = session.limit(use)
@@ -324,9 +337,9 @@ def _best_line(session, leading: list, weights: np.ndarray, *, radius: float, an
             start = rng.uniform(0.0, 2 * np.pi)
             t1 = times(frame.d1, h.rotation)
             t2 = times(frame.d2, h.rotation)
-            directions = fan(t1, t2, angle, start)
-            outcomes = [outcome(models[g.model], g, line, directions, step=spacing, points=points, spacing=spacing)
-                        for g in poses]
+            directions = None if single else fan(t1, t2, angle, start)
+            outcomes = [outcome(models[g.model], g, line, directions, step=line_step(spacing, line.length),
+                                points=points, spacing=spacing) for g in poses]
             takes = np.array([o.seen is not Seen.UNTAKEN for o in outcomes])
             if not np.all(by_model[takes].any(axis=0)):   # every model has a pose that predicts the outcome
                 continue

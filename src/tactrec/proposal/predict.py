@@ -81,10 +81,13 @@ def predicted(model, h, contact_w: np.ndarray, directions_w: np.ndarray, *, poin
 def outcome(model, pose, line, directions, *, step: float, points: int, spacing: float) -> Prediction:
     """What ``line`` gives under ``pose`` (:class:`Prediction`): where it meets the surface and how far
     it cuts into it (:func:`tactrec.missed.crossing`), and there the touch the sensor would record
-    (:func:`predicted`), or that the surface there will not take it."""
+    (:func:`predicted`), or that the surface there will not take it.  ``directions`` None: the sensor
+    records a single contact, where the line meets the surface (any surface takes it)."""
     hit, depth = crossing(model, pose, line, step)
     if hit is None:
         return Prediction(Seen.MISS, None, None, None, depth)
+    if directions is None:
+        return Prediction(Seen.HIT, hit[None], np.ones(1, dtype=bool), hit, depth)
     x = predicted(model, pose, hit, directions, points=points, spacing=spacing)
     if x is None:
         return Prediction(Seen.UNTAKEN, None, None, hit, depth)

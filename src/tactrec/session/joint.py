@@ -13,7 +13,7 @@ import numpy as np
 from ..features import Touch
 from ..io.touch import TactileData
 from ..linalg import clearly_less
-from ..missed import miss_excess
+from ..missed import line_step, miss_excess
 from ..probability import evidence, fit_limit, residuals, resolution
 from .fit import fit_stage, joint_model
 from .result import Hypothesis, SessionResult
@@ -40,7 +40,8 @@ def session_evidence(recognizer, touches: Touches, misses, ranked, keep):
                         h.translation, x, h.scale) for h in ranked]
     lines = None
     if misses:
-        step = 0.5 * float(np.median([records[i].world.spacing for i in keep]))
+        step = line_step(0.5 * float(np.median([records[i].world.spacing for i in keep])),
+                         max(line.length for line in misses))
         lines = miss_excess(by_name, ranked, misses, step=step, limit=touches.limit(keep))
     floor = touches.floor
     parts = [features[i] for i in order if i not in contacts]

@@ -31,9 +31,12 @@ def _meeting(curves: list) -> np.ndarray:
 
 
 def _proposed_curves(model, entry: dict, proposal: dict, length: float) -> list[np.ndarray]:
-    """The proposal's curves on ``model`` under ``entry``'s pose, model frame, each ``length`` long."""
+    """The proposal's curves on ``model`` under ``entry``'s pose, model frame, each ``length`` long (none
+    for a proposed single contact)."""
     from ..proposal.predict import predicted
 
+    if proposal.get("directions") is None:
+        return []
     R, t, scale = pose_of(entry)
     contact = np.asarray(proposal["contact"], float)
     directions = np.asarray(proposal["directions"], float)
