@@ -131,13 +131,12 @@ def test_the_contacts_screen_keeps_what_scoring_every_pose_keeps(meshes, monkeyp
 
     for entry in (meshes[0], meshes[3]):
         P, N, reach = stage._places(entry.model)
-        D = stage._distances(P)
         for k in range(2):
             c = simulate_contacts(entry.model, 6, noise=0.05, normal_sd=3.0, rng=np.random.default_rng([5, k])).contacts
             xa = np.ascontiguousarray(stage.tangent_points(c.points, c.normals, c.normal_sd, 0.05))
             tri = stage.triangles(c.points, 1)[0]
             tol = 2.0 * reach + 0.3
-            args = (entry.model.distance_field, P, N, D, c.points, xa, c.normals, c.normal_sd, tri, tol)
+            args = (entry.model.distance_field, P, N, c.points, xa, c.normals, c.normal_sd, tri, tol)
             monkeypatch.setattr(stage, "FIELD_KEEP", 40)
             monkeypatch.setattr(stage, "CHUNK", 10**12)
             full = stage._triangle_screen(*args)

@@ -143,35 +143,21 @@ def _angle(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     return np.degrees(np.arccos(np.clip(np.sum(u * v, axis=-1), -1.0, 1.0)))
 
 
-def _distances(P: np.ndarray) -> np.ndarray:
-    """The distances between the places ``P (p, 3)``, ``(p, p)`` (element-wise: no BLAS)."""
-    return np.concatenate([np.linalg.norm(P[start:start + 256, None] - P[None], axis=2)
-                           for start in range(0, len(P), 256)])
+def _pairs(P, N, length: float, tol: float, na, nb):
+    """The ordered pairs of distinct places ``(v, w)`` as far apart as ``length`` (within ``tol``) whose
+    normals make the angles the contacts' normals make with the chord between them and with each other:
+    ``na``, ``nb`` (each None or ``(normal, angle to the chord, allowance in degrees)``), in one
+    compiled pass (:func:`tactrec.engine.kernels.place_pairs`).  Returns ``v (q,), w (q,)``."""
+    from .kernels import place_pairs
 
-
-def _pairs(P, N, D, length: float, tol: float, na, nb):
-    """The ordered pairs of distinct places ``(v, w)`` as far apart as ``length`` (within ``tol``; ``D``,
-    their distances, :func:`_distances`) whose normals make the angles the contacts' normals make
-    with the chord between them and with each other: ``na``, ``nb`` (each None or ``(normal, angle to
-    the chord, allowance in degrees)``).  Returns ``v (q,), w (q,)``."""
-    vs, ws = [], []
-    for start in range(0, len(P), 256):
-        d = D[start:start + 256]
-        v, w = np.nonzero((np.abs(d - length) <= tol) & (d > 0))
-        v = v + start
-        if len(v) and (na is not None or nb is not None):
-            u = (P[w] - P[v]) / d[v - start, w][:, None]
-            ok = np.ones(len(v), dtype=bool)
-            if na is not None:
-                ok &= np.abs(_angle(N[v], u) - na[1]) <= na[2]
-            if nb is not None:
-                ok &= np.abs(_angle(N[w], u) - nb[1]) <= nb[2]
-            if na is not None and nb is not None:
-                ok &= np.abs(_angle(N[v], N[w]) - _angle(na[0], nb[0])) <= np.hypot(na[2], nb[2])
-            v, w = v[ok], w[ok]
-        vs.append(v)
-        ws.append(w)
-    return np.concatenate(vs), np.concatenate(ws)
+    ends = np.full(6, -1.0)
+    if na is not None:
+        ends[0:2] = na[1], na[2]
+    if nb is not None:
+        ends[2:4] = nb[1], nb[2]
+    if na is not None and nb is not None:
+        ends[4:6] = float(_angle(na[0], nb[0])), float(np.hypot(na[2], nb[2]))
+    return place_pairs(np.ascontiguousarray(P), np.ascontiguousarray(N), float(length), float(tol), ends)
 
 
 def _frames(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
@@ -184,9 +170,9 @@ def _frames(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
     return np.stack([e1, np.cross(e3, e1), e3], axis=-1)
 
 
-def _triangle_screen(field, P, N, D, x, xa, normals, sd, tri, tol):
+def _triangle_screen(field, P, N, x, xa, normals, sd, tri, tol):
     """Every pose putting the contacts ``tri = (a, b, c)`` of ``x`` on a triangle of places with the same
-    sides (within ``tol``; ``D``, the places' distances) and normals alike (:func:`_pairs`), screened on
+    sides (within ``tol``) and normals alike (:func:`_pairs`), screened on
     ``field`` by the points ``xa`` (:func:`tangent_points`) in parts of about :data:`CHUNK` triangles (so
     that a model whose places hold millions of such triangles is screened in bounded memory and compiled
     code, :func:`tactrec.engine.kernels.triangle_screen`).  Once :data:`FIELD_KEEP` poses are held, a
@@ -202,7 +188,7 @@ def _triangle_screen(field, P, N, D, x, xa, normals, sd, tri, tol):
         u = (x[j] - x[i]) / length
         ends = [None if not (np.isfinite(normals[k, 0]) and np.isfinite(sd[k])) else
                 (normals[k], float(_angle(normals[k], u)), ANGLE * float(sd[k])) for k in (i, j)]
-        return _pairs(P, N, D, length, tol, *ends)
+        return _pairs(P, N, length, tol, *ends)
 
     none = np.zeros(0, dtype=np.int64)
     held, score, tried = (none, none, none), np.zeros(0, dtype=np.float32), 0
@@ -282,11 +268,10 @@ def contact_stage(held, indices, touch, limit: float, fit: float) -> list[Regist
         xa = np.ascontiguousarray(tangent_points(x, c.normals, c.normal_sd, fit * scale))
         limit_model = limit * scale
         P, N, reach = _places(model)
-        D = _distances(P)                               # every side of every triangle reads them
         tol = 2.0 * reach + SIGMAS * np.sqrt(2.0) * touch.noise * scale
         field, tried, found = model.distance_field, 0, None
         for tri in triangles(x, TRIANGLES):
-            R, t, score, posed = _triangle_screen(field, P, N, D, x, xa, c.normals, c.normal_sd, tri, tol)
+            R, t, score, posed = _triangle_screen(field, P, N, x, xa, c.normals, c.normal_sd, tri, tol)
             tried += posed
             if not len(R):
                 continue

@@ -17,7 +17,7 @@ from ..compiled import fork_safe
 from ..registration.step import _add_plane, _damped_solve, _turn
 from ..surfaces.field_kernels import BRICK, _sample, _sample_gradient
 
-__all__ = ["screen_rotations", "field_best", "field_refine", "triangle_screen", "triangle_poses", "warm"]
+__all__ = ["screen_rotations", "field_best", "field_refine", "place_pairs", "triangle_screen", "triangle_poses", "warm"]
 
 fork_safe()
 
@@ -126,6 +126,62 @@ def field_refine(index, bricks, origin, inv_h, quantum, truncation, shift, R, t,
 
 
 @njit(cache=True, nogil=True)
+def _degrees_between(ax, ay, az, bx, by, bz):
+    """The angle between unit vectors ``a`` and ``b``, degrees."""
+    return np.degrees(np.arccos(min(max(ax * bx + ay * by + az * bz, -1.0), 1.0)))
+
+
+@njit(cache=True, nogil=True)
+def _pair_matches(P, N, v, w, length, tol, ends):
+    """Whether the places ``v, w`` lie ``length`` apart (within ``tol``) and their normals make the
+    angles ``ends`` gives: ``(angle of a's normal to the chord, allowance, angle of b's, allowance,
+    angle between the two normals, allowance)``, an allowance below zero testing nothing."""
+    dx = P[w, 0] - P[v, 0]
+    dy = P[w, 1] - P[v, 1]
+    dz = P[w, 2] - P[v, 2]
+    d = np.sqrt(dx * dx + dy * dy + dz * dz)
+    if not (abs(d - length) <= tol and d > 0.0):
+        return False
+    ux, uy, uz = dx / d, dy / d, dz / d
+    if ends[1] >= 0.0 and not abs(_degrees_between(N[v, 0], N[v, 1], N[v, 2], ux, uy, uz) - ends[0]) <= ends[1]:
+        return False
+    if ends[3] >= 0.0 and not abs(_degrees_between(N[w, 0], N[w, 1], N[w, 2], ux, uy, uz) - ends[2]) <= ends[3]:
+        return False
+    if ends[5] >= 0.0 and not abs(_degrees_between(N[v, 0], N[v, 1], N[v, 2], N[w, 0], N[w, 1], N[w, 2])
+                                  - ends[4]) <= ends[5]:
+        return False
+    return True
+
+
+@njit(cache=True, parallel=True)
+def place_pairs(P, N, length, tol, ends):
+    """The ordered pairs of distinct places ``(v, w)`` of ``P (p, 3)`` (outward normals ``N``) as far
+    apart as ``length`` within ``tol``, whose normals make the angles of ``ends`` (:func:`_pair_matches`):
+    ``v (q,), w (q,)`` in the order of ``v``, then ``w``."""
+    p = P.shape[0]
+    count = np.zeros(p, dtype=np.int64)
+    for v in prange(p):
+        c = 0
+        for w in range(p):
+            if _pair_matches(P, N, v, w, length, tol, ends):
+                c += 1
+        count[v] = c
+    start = np.zeros(p + 1, dtype=np.int64)
+    for v in range(p):
+        start[v + 1] = start[v] + count[v]
+    out_v = np.empty(start[p], dtype=np.int64)
+    out_w = np.empty(start[p], dtype=np.int64)
+    for v in prange(p):
+        k = start[v]
+        for w in range(p):
+            if _pair_matches(P, N, v, w, length, tol, ends):
+                out_v[k] = v
+                out_w[k] = w
+                k += 1
+    return out_v, out_w
+
+
+@njit(cache=True, nogil=True)
 def _triangle_pose(P, va, wb, wc, data_frame, xa, R, t):
     """Into ``R (3, 3), t (3,)``: the pose moving the data triangle whose frame is ``data_frame``
     (columns: along ``ab``, in the plane towards ``c``, the plane's normal) and whose first corner is
@@ -210,6 +266,7 @@ def warm() -> None:
     field_best(*field, eye, points, turned)
     field_refine(*field, eye, points, points, 1)
     one = np.zeros(1, dtype=np.int64)
+    place_pairs(points, eye[0], 1.0, 1.0, np.full(6, -1.0))
     triangle_screen(*field, points, one, one, one, one, one, one, 1.0, 1.0, np.eye(3), points[0], points, np.inf)
     triangle_poses(points, one, one, one, np.eye(3), points[0])
     plane_step(eye, points, np.zeros((2, 2, 3)), np.zeros((2, 2, 3)), np.zeros((2, 2)))
