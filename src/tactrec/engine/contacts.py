@@ -192,6 +192,7 @@ def _triangle_screen(field, P, N, x, xa, normals, sd, tri, tol):
 
     none = np.zeros(0, dtype=np.int64)
     held, score, tried = (none, none, none), np.zeros(0, dtype=np.float32), 0
+    data_frame = np.ascontiguousarray(_frames(x[a], x[b], x[c]))
     v1, w1 = side(a, b)
     v2, w2 = side(a, c)
     if len(v1) and len(v2):
@@ -202,7 +203,6 @@ def _triangle_screen(field, P, N, x, xa, normals, sd, tri, tol):
         count = np.searchsorted(v2, v1, side="right") - first
         ends = np.cumsum(count)
         bc = float(np.linalg.norm(x[c] - x[b]))
-        data_frame = np.ascontiguousarray(_frames(x[a], x[b], x[c]))
         # the triangle's own contacts last: every pose puts them on the surface, so the others decide early
         rest = np.ones(len(xa), dtype=bool)
         rest[list(tri)] = False
@@ -223,7 +223,7 @@ def _triangle_screen(field, P, N, x, xa, normals, sd, tri, tol):
             best = stable_order(score)[:FIELD_KEEP]
             held, score = tuple(h[best] for h in held), score[best]
             lo = hi
-    R, t = triangle_poses(P, *held, data_frame if len(score) else np.eye(3), x[a])
+    R, t = triangle_poses(P, *held, data_frame, x[a])
     return R, t, score, tried
 
 

@@ -115,14 +115,23 @@ def field_refine(index, bricks, origin, inv_h, quantum, truncation, shift, R, t,
             if not _damped_solve(A, b, step):
                 break
             _turn(step, dR, tmp, Ri, ti, Ri, ti)
-        total = 0.0
-        for k in range(m):
-            y0 = Ri[0, 0] * x[k, 0] + Ri[0, 1] * x[k, 1] + Ri[0, 2] * x[k, 2] + ti[0]
-            y1 = Ri[1, 0] * x[k, 0] + Ri[1, 1] * x[k, 1] + Ri[1, 2] * x[k, 2] + ti[1]
-            y2 = Ri[2, 0] * x[k, 0] + Ri[2, 1] * x[k, 1] + Ri[2, 2] * x[k, 2] + ti[2]
-            total += abs(_sample(index, bricks, origin, inv_h, quantum, truncation, shift, y0, y1, y2))
-        score[i] = total / m
+        score[i] = _posed_sum(index, bricks, origin, inv_h, quantum, truncation, shift, Ri, ti, x, np.inf) / m
     return Ro, to, score
+
+
+@njit(cache=True, nogil=True)
+def _posed_sum(index, bricks, origin, inv_h, quantum, truncation, shift, R, t, x, cap):
+    """The sum of the truncated distances of the points ``x (m, 3)`` moved by ``R, t``, in their order;
+    it stops once past ``cap`` (its terms are non-negative: the full sum is past it too)."""
+    total = 0.0
+    for k in range(x.shape[0]):
+        y0 = R[0, 0] * x[k, 0] + R[0, 1] * x[k, 1] + R[0, 2] * x[k, 2] + t[0]
+        y1 = R[1, 0] * x[k, 0] + R[1, 1] * x[k, 1] + R[1, 2] * x[k, 2] + t[1]
+        y2 = R[2, 0] * x[k, 0] + R[2, 1] * x[k, 1] + R[2, 2] * x[k, 2] + t[2]
+        total += abs(_sample(index, bricks, origin, inv_h, quantum, truncation, shift, y0, y1, y2))
+        if total > cap:
+            break
+    return total
 
 
 @njit(cache=True, nogil=True)
@@ -181,20 +190,24 @@ def place_pairs(P, N, length, tol, ends):
     return out_v, out_w
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _triangle_pose(P, va, wb, wc, data_frame, xa, R, t):
     """Into ``R (3, 3), t (3,)``: the pose moving the data triangle whose frame is ``data_frame``
     (columns: along ``ab``, in the plane towards ``c``, the plane's normal) and whose first corner is
-    ``xa (3,)`` onto the places ``P[va], P[wb], P[wc]``, frame onto frame."""
-    e1 = P[wb] - P[va]
-    e1 = e1 / np.sqrt(e1[0] * e1[0] + e1[1] * e1[1] + e1[2] * e1[2])
-    f = P[wc] - P[va]
-    e3 = np.array([e1[1] * f[2] - e1[2] * f[1], e1[2] * f[0] - e1[0] * f[2], e1[0] * f[1] - e1[1] * f[0]])
-    e3 = e3 / max(np.sqrt(e3[0] * e3[0] + e3[1] * e3[1] + e3[2] * e3[2]), 1e-300)
-    e2 = np.array([e3[1] * e1[2] - e3[2] * e1[1], e3[2] * e1[0] - e3[0] * e1[2], e3[0] * e1[1] - e3[1] * e1[0]])
-    for i in range(3):
-        for k in range(3):
-            R[i, k] = e1[i] * data_frame[k, 0] + e2[i] * data_frame[k, 1] + e3[i] * data_frame[k, 2]
+    ``xa (3,)`` onto the places ``P[va], P[wb], P[wc]``, frame onto frame.  In scalars (no array a
+    pose); a division by zero gives inf or NaN, as numpy's arithmetic does."""
+    ax, ay, az = P[wb, 0] - P[va, 0], P[wb, 1] - P[va, 1], P[wb, 2] - P[va, 2]
+    n = np.sqrt(ax * ax + ay * ay + az * az)
+    ax, ay, az = ax / n, ay / n, az / n
+    fx, fy, fz = P[wc, 0] - P[va, 0], P[wc, 1] - P[va, 1], P[wc, 2] - P[va, 2]
+    cx, cy, cz = ay * fz - az * fy, az * fx - ax * fz, ax * fy - ay * fx
+    n = max(np.sqrt(cx * cx + cy * cy + cz * cz), 1e-300)
+    cx, cy, cz = cx / n, cy / n, cz / n
+    bx, by, bz = cy * az - cz * ay, cz * ax - cx * az, cx * ay - cy * ax
+    for k in range(3):
+        R[0, k] = ax * data_frame[k, 0] + bx * data_frame[k, 1] + cx * data_frame[k, 2]
+        R[1, k] = ay * data_frame[k, 0] + by * data_frame[k, 1] + cy * data_frame[k, 2]
+        R[2, k] = az * data_frame[k, 0] + bz * data_frame[k, 1] + cz * data_frame[k, 2]
     for i in range(3):
         t[i] = P[va, i] - (R[i, 0] * xa[0] + R[i, 1] * xa[1] + R[i, 2] * xa[2])
 
@@ -224,14 +237,7 @@ def triangle_screen(index, bricks, origin, inv_h, quantum, truncation, shift, P,
                 out[offset[r] + j] = np.nan
                 continue
             _triangle_pose(P, v1[r], w1[r], wc, data_frame, xa, R, t)
-            total = 0.0
-            for k in range(m):
-                y0 = R[0, 0] * x[k, 0] + R[0, 1] * x[k, 1] + R[0, 2] * x[k, 2] + t[0]
-                y1 = R[1, 0] * x[k, 0] + R[1, 1] * x[k, 1] + R[1, 2] * x[k, 2] + t[1]
-                y2 = R[2, 0] * x[k, 0] + R[2, 1] * x[k, 1] + R[2, 2] * x[k, 2] + t[2]
-                total += abs(_sample(index, bricks, origin, inv_h, quantum, truncation, shift, y0, y1, y2))
-                if total > cap:
-                    break
+            total = _posed_sum(index, bricks, origin, inv_h, quantum, truncation, shift, R, t, x, cap)
             out[offset[r] + j] = np.inf if total > cap else total / m
     return out
 
