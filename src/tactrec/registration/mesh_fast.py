@@ -35,8 +35,8 @@ from ..surfaces.mesh_grid import cells as _cells, first_per_cell
 from .result import Registration, local_frame, rotations_from_vectors, rotations_z
 from .step import covariance
 
-__all__ = ["places", "curvature_gaps", "leading_places", "first_per_cell", "first_per_place", "fibonacci_sphere",
-           "frame_poses", "registration", "data_curvatures", "prepare", "starting_poses"]
+__all__ = ["places", "curvature_gaps", "leading_places", "first_per_cell", "first_per_place", "first_per_direction",
+           "fibonacci_sphere", "frame_poses", "registration", "data_curvatures", "prepare", "starting_poses"]
 
 
 def prepare(model: MeshModel) -> None:
@@ -104,31 +104,39 @@ def leading_places(gaps: np.ndarray, count: int | None, thin) -> np.ndarray:
 def first_per_place(model: MeshModel, order: np.ndarray, size: float, angle: float, *,
                     folded: bool = False) -> np.ndarray:
     """Of the vertices ``order (n,)``, in that order, the first of each *place*: a cell of a grid
-    ``size`` across and a direction of the fitted normal.  A cell's first vertex is a place; so is,
-    in each direction bin (a Fibonacci sphere's cell, about ``angle`` degrees across), the first of
-    the cell's vertices whose normal lies more than ``angle`` from its first's.  On a smooth surface
-    a cell's normals lie within a few degrees and it is one place; on a sharp, thin or folded place
-    (a crest, an edge, a leg a few millimetres thick) they span tens of degrees, and no one vertex
-    poses the data for the rest (on the other-source P3 touches that ended on no fit, the cell's
-    first vertex was 86-165 degrees off the true contact's normal).  With ``folded``, only the
-    places of such *folded* cells (more than one direction)."""
-    cells = _cells(model, order, size)
+    ``size`` across and a direction of the fitted normal (:func:`first_per_direction`).  On a smooth
+    surface a cell's normals lie within a few degrees and it is one place; on a sharp, thin or folded
+    place (a crest, an edge, a leg a few millimetres thick) they span tens of degrees, and no one vertex
+    poses the data for the rest (on the other-source P3 touches that ended on no fit, the cell's first
+    vertex was 86-165 degrees off the true contact's normal).  With ``folded``, only the places of such
+    *folded* cells (more than one direction)."""
+    chosen = first_per_direction(_cells(model, order, size), model.fine_curvatures.normal[order], angle,
+                                 folded=folded)
+    return order[chosen]
+
+
+def first_per_direction(cells: np.ndarray, normal: np.ndarray, angle: float, *, folded: bool = False) -> np.ndarray:
+    """The positions, in order, of the first of each place among points in a chosen order, each in the
+    cell ``cells (n,)`` (an integer key) with unit ``normal (n, 3)``: a cell's first point is a place;
+    so is, in each direction bin (a Fibonacci sphere's cell, about ``angle`` degrees across), the first
+    of the cell's points whose normal lies more than ``angle`` from its first's.  With ``folded``, only
+    the places of cells with more than one direction."""
     _, first, inverse = np.unique(cells, return_index=True, return_inverse=True)
-    normal = model.fine_curvatures.normal[order]
-    head = normal[first][inverse]                                   # each vertex's cell's first
+    inverse = inverse.reshape(-1)
+    head = normal[first][inverse]                                   # each point's cell's first
     off = np.nonzero(np.sum(normal * head, axis=1) < np.cos(np.deg2rad(angle)))[0]   # element-wise
     if len(off) == 0:
-        return order[:0] if folded else order[np.sort(first)]
+        return first[:0] if folded else np.sort(first)
     bins = fibonacci_sphere(max(12, int(round(4.0 * np.pi / np.deg2rad(angle) ** 2))))
     direction = np.argmax(np.einsum("nk,bk->nb", normal[off], bins), axis=1)      # no BLAS
     key = inverse[off].astype(np.int64) * len(bins) + direction
     _, extra = np.unique(key, return_index=True)
-    chosen = np.sort(np.concatenate([first, off[extra]]))          # positions in ``order``
+    chosen = np.sort(np.concatenate([first, off[extra]]))          # positions in the order
     if folded:
         fold = np.zeros(len(first), dtype=bool)
         fold[inverse[off]] = True
         chosen = chosen[fold[inverse[chosen]]]
-    return order[chosen]
+    return chosen
 
 
 def fibonacci_sphere(count: int) -> np.ndarray:
