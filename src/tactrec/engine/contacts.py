@@ -14,11 +14,22 @@ Per model the search (:func:`contact_stage`):
 
 1. places: of :data:`DENSE` x :data:`PLACES` points uniform over the mesh's
    area (seeded; a mesh's vertices need not cover its surface), the first of
-   each grid cell, about :data:`PLACES` of them, each with its face's normal;
-   ``reach``, the farthest any of the points lies from its nearest place,
-   bounds how far a contact lies from one, so a pair of places matches a
-   pair of contacts whose distance is within ``2 reach`` (and three of the
-   points' standard deviations) of theirs;
+   each grid cell (about :data:`PLACES` cells) and, in a cell whose points'
+   normals lie more than :data:`FOLD` degrees apart (a thin wall's two
+   sides, an edge's two faces), the first of each direction of them (the
+   curves' rule, :func:`tactrec.registration.mesh_fast.first_per_direction`),
+   each with its face's normal.  A point's own place is the place of its
+   cell whose normal is nearest its own; ``reach``, the farthest any of the
+   points lies from its own place, bounds how far a contact lies from the
+   place that poses it, so a pair of places matches a pair of contacts whose
+   distance is within ``2 reach`` (and three of the points' standard
+   deviations) of theirs.  Their normals are tested with the contacts' own
+   uncertainty alone, not with how far a place's normal and chord may turn
+   from its contact's: allowing for that (up to :data:`FOLD` and
+   ``asin(2 reach / distance)``) makes the tests a bound, but a power
+   drill's four contacts then pose 150 million triangles in 46 s, against
+   15 thousand in 0.7 s.  So they screen, and how often the search misses
+   the touched model is measured (``docs/benchmarks.md``);
 2. for each of up to :data:`TRIANGLES` triangles of contacts (the largest
    first, then the largest with a new corner), takes every pair of places
    matching ``a`` and ``b`` (and alike in normals), joins the pairs that
@@ -29,9 +40,10 @@ Per model the search (:func:`contact_stage`):
    them, :func:`tactrec.engine.kernels.triangle_screen`; a pose's sum stops
    once it can no longer be among the best :data:`FIELD_KEEP`), gives the
    best :data:`FIELD_KEEP` :data:`FIELD_STEPS` steps on the field
-   (:func:`~tactrec.engine.kernels.field_refine`) and refines the best
-   :data:`KEEP` of those on exact distances
-   (:func:`tactrec.registration.solver.solve`).  A normal takes part in
+   (:func:`~tactrec.engine.kernels.field_refine`) and refines :data:`KEEP`
+   of those on exact distances (:func:`tactrec.registration.solver.solve`):
+   the best of those whose normals agree with the contacts' (the test of
+   step 4, :func:`_kept`), then the best of the others.  A normal takes part in
    these steps as four points on the contact's tangent plane
    (:func:`tangent_points`), each where a tilt of one standard deviation
    lifts it by the touch's fit limit: a pose that turns the
@@ -60,13 +72,18 @@ import numpy as np
 from ..linalg import rotate, stable_order, tangents, transform
 from ..registration.result import Outcome, Registration
 
-__all__ = ["contact_stage", "tangent_points", "triangles", "PLACES", "DENSE", "FIELD_KEEP", "FIELD_STEPS", "KEEP",
-           "TRIANGLES", "SIGMAS", "ANGLE", "CHUNK"]
+__all__ = ["contact_stage", "tangent_points", "triangles", "PLACES", "DENSE", "FOLD", "FIELD_KEEP", "FIELD_STEPS",
+           "KEEP", "TRIANGLES", "SIGMAS", "ANGLE", "CHUNK"]
 
 #: about this many places per model (one per grid cell): the pairs of places number its square
 PLACES = 800
 #: points sampled per place, uniform over the area: what the places are chosen from and posed contacts tested on
 DENSE = 20
+#: a cell whose points' normals lie more than this many degrees from its first's has a place per direction of
+#: them: a fold (a thin wall's two sides lie 180 degrees apart, an edge's faces 90).  A rough scan's facets within
+#: a cell seldom lie so far apart; at the curves' 20 degrees the strawberry's places grow from 1,064 to 2,803 and
+#: a search of three of its contacts takes eight times as long
+FOLD = 60.0
 #: poses per model that take steps on the distance field (the best by the field's screen)
 FIELD_KEEP = 1000
 #: their steps
@@ -118,24 +135,40 @@ def triangles(points: np.ndarray, count: int) -> list[tuple[int, int, int]]:
 
 
 def _places(model):
-    """The mesh ``model``'s places for contacts, built once: of :data:`DENSE` x :data:`PLACES` points
-    uniform over its area (seeded), the first of each grid cell about :data:`PLACES` cover (positions
-    ``(p, 3)``, their faces' normals ``(p, 3)``), and ``reach``, the farthest any of the points lies
-    from its nearest place."""
-    from scipy.spatial import cKDTree
-
+    """The mesh ``model``'s places for contacts, built once (module text, step 1): positions ``(p, 3)``,
+    their faces' normals ``(p, 3)`` and ``reach``, the farthest any of the dense points lies from its
+    own place (:func:`_own_places`), model units."""
+    from ..registration.mesh_fast import first_per_direction
     from ..surfaces.mesh_table import area_samples
 
     memo = model.search_memo
     if "contact_places" not in memo:
         dense, normals = area_samples(model, DENSE * PLACES, np.random.default_rng(0))
         size = float(np.sqrt(model.area / PLACES))
-        cells = np.floor((dense - dense.min(axis=0)) / size).astype(np.int64)
-        _, first = np.unique(cells, axis=0, return_index=True)
-        first = np.sort(first)
-        P, N = dense[first], normals[first]
-        memo["contact_places"] = (P, N, float(cKDTree(P).query(dense)[0].max()))
+        cell = np.floor((dense - dense.min(axis=0)) / size).astype(np.int64)
+        span = cell.max(axis=0) + 1
+        key = (cell[:, 0] * span[1] + cell[:, 1]) * span[2] + cell[:, 2]
+        chosen = first_per_direction(key, normals, FOLD)
+        own = _own_places(key, normals, chosen)
+        reach = float(np.linalg.norm(dense - dense[own], axis=1).max())
+        memo["contact_places"] = (dense[chosen], normals[chosen], reach)
     return memo["contact_places"]
+
+
+def _own_places(key: np.ndarray, normals: np.ndarray, chosen: np.ndarray) -> np.ndarray:
+    """Each point's own place ``(n,)``, an index of the points: of the places ``chosen`` in its cell
+    (``key``), the one whose normal is nearest its own (the first of equals)."""
+    order = chosen[np.argsort(key[chosen], kind="stable")]
+    lo = np.searchsorted(key[order], key, side="left")
+    count = np.searchsorted(key[order], key, side="right") - lo
+    own, best = order[lo], np.sum(normals * normals[order[lo]], axis=1)
+    for j in range(1, int(count.max())):
+        has = np.flatnonzero(count > j)
+        other = order[lo[has] + j]
+        cos = np.sum(normals[has] * normals[other], axis=1)
+        better = cos > best[has]
+        own[has[better]], best[has[better]] = other[better], cos[better]
+    return own
 
 
 def _angle(u: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -244,6 +277,18 @@ def _agree(R, surface, normals, sd) -> np.ndarray:
     return total <= chi2.isf(norm.sf(SIGMAS), 2 * int(test.sum()))
 
 
+def _kept(model, R, t, score, x, normals, sd) -> np.ndarray:
+    """The indices of the :data:`KEEP` poses ``R (h, 3, 3), t (h, 3)`` refined on exact distances: those
+    whose normals agree with the contacts' (:func:`_agree`, at the model's normals where each pose puts
+    the contacts ``x``) first, by the field's ``score``, then the others by it.  The test that accepts a
+    pose decides which poses the exact steps are spent on: a few contacts fit many poses by their
+    distances alone, and the best by distance need not be the ones their normals allow."""
+    order = stable_order(score)
+    surface = model.planes(transform(R[order], t[order], x))[1]
+    agree = _agree(R[order], surface, normals, sd)
+    return np.concatenate([order[agree], order[~agree]])[:KEEP]
+
+
 def contact_stage(held, indices, touch, limit: float, fit: float) -> list[Registration]:
     """A runner's stage: each model of ``indices`` posed on the contacts of ``touch`` (a
     :class:`~tactrec.features.Touch` of a ``contacts`` touch; see the module text).  The triangles are
@@ -276,7 +321,7 @@ def contact_stage(held, indices, touch, limit: float, fit: float) -> list[Regist
             if not len(R):
                 continue
             R, t, score = field_refine(*field.args(), R, t, xa, FIELD_STEPS)
-            best = stable_order(score)[:KEEP]
+            best = _kept(model, R, t, score, x, c.normals, c.normal_sd)
             refined = solve(model, R[best], t[best], xa, Criteria(STEPS))
             distance, surface = model.planes(transform(refined.R, refined.t, x))           # the contacts' own
             error = np.abs(distance).mean(axis=1)
