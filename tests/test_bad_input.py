@@ -493,7 +493,7 @@ def test_bench_sweep_options_belong_to_their_benchmarks(tmp_path, capsys):
     bad(capsys, ["bench", "paper-fig11", "--lengths", "9,-1", "--out", tmp_path / "bench"], "--lengths",
         "positive")
     bad(capsys, ["bench", "kernels", "--sets", "hard", "--out", tmp_path / "bench"], "kernels",
-        "--sets applies to calibration, multi-touch, open-world, sensor, patch and contacts only")
+        "--sets applies to calibration, multi-touch, open-world, sensor, patch, contacts and contact-search only")
     bad(capsys, ["bench", "kernels", "--radii", "6", "--out", tmp_path / "bench"], "kernels",
         "--radii applies to patch only")
     bad(capsys, ["bench", "patch", "--blur", "-1", "--out", tmp_path / "bench"], "patch", "--blur must be")

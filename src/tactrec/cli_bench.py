@@ -85,10 +85,11 @@ def cmd_bench(args) -> int:
         from .bench.sensor import SCAN_SETS as SENSOR_SETS
 
         known = {"calibration": CALIBRATION_SETS, "multi-touch": SESSION_SETS, "open-world": SCAN_SETS + EXTRA_SETS,
-                 "sensor": SENSOR_SETS, "patch": PATCH_SETS, "contacts": CONTACT_SETS}.get(args.name)
+                 "sensor": SENSOR_SETS, "patch": PATCH_SETS, "contacts": CONTACT_SETS,
+                 "contact-search": CONTACT_SETS}.get(args.name)
         if known is None:
-            raise InputError("--sets applies to calibration, multi-touch, open-world, sensor, patch and contacts only",
-                             args.name)
+            raise InputError("--sets applies to calibration, multi-touch, open-world, sensor, patch, contacts and "
+                             "contact-search only", args.name)
         extra["sets"] = _known(args.sets, known, "set", "--sets", args.name)
     if args.strategies is not None:
         from .bench.contacts import STRATEGIES as CONTACT_STRATEGIES

@@ -55,6 +55,7 @@ BENCHMARKS: dict[str, Benchmark] = {
     "sensor": Benchmark("sensor", "run", "touches as sensors record them: tip, outliers, miss, spacing, jitter"),
     "patch": Benchmark("patch", "run", "touches as patches of 2-10 mm: accuracy beside the fit-limit ceiling, contact, time"),
     "contacts": Benchmark("contacts", "run", "sessions of single contacts: how many it takes to be right at >= 0.95"),
+    "contact-search": Benchmark("contact_search", "run", "touches of 3-5 contacts: how often the search rejects the touched scan"),
     "tacloc": Benchmark("tacloc", "run", "TacLoc's registration (tacreg, installed apart) on patch's patches, beside fast"),
     "viewer": Benchmark("viewer", "run", "tactrec show's page: its size, and the time a browser takes to draw it"),
     "answers": Benchmark("answers", "run", "the JSON of 50 seeded recognitions and 5 sessions, and their digests"),
