@@ -18,10 +18,11 @@ Per model the search (:func:`contact_stage`):
    normals lie more than :data:`FOLD` degrees apart (a thin wall's two
    sides, an edge's two faces), the first of each direction of them (the
    curves' rule, :func:`tactrec.registration.mesh_fast.first_per_direction`),
-   each with its face's normal.  A point's own place is the place of its
-   cell whose normal is nearest its own; ``reach``, the farthest any of the
-   points lies from its own place, bounds how far a contact lies from the
-   place that poses it, so a pair of places matches a pair of contacts whose
+   each with its face's normal.  ``reach``, the farthest any of the points
+   lies from its nearest place whose normal is within :data:`FOLD` of its
+   own (among the :data:`NEAR` nearest; else the place of its cell whose
+   normal is nearest its own), bounds how far a contact lies from a place
+   that can pose it, so a pair of places matches a pair of contacts whose
    distance is within ``2 reach`` (and three of the points' standard
    deviations) of theirs.  Their normals are tested with the contacts' own
    uncertainty alone, not with how far a place's normal and chord may turn
@@ -72,8 +73,8 @@ import numpy as np
 from ..linalg import rotate, stable_order, tangents, transform
 from ..registration.result import Outcome, Registration
 
-__all__ = ["contact_stage", "tangent_points", "triangles", "PLACES", "DENSE", "FOLD", "FIELD_KEEP", "FIELD_STEPS",
-           "KEEP", "TRIANGLES", "SIGMAS", "ANGLE", "CHUNK"]
+__all__ = ["contact_stage", "tangent_points", "triangles", "PLACES", "DENSE", "FOLD", "NEAR", "FIELD_KEEP",
+           "FIELD_STEPS", "KEEP", "TRIANGLES", "SIGMAS", "ANGLE", "CHUNK"]
 
 #: about this many places per model (one per grid cell): the pairs of places number its square
 PLACES = 800
@@ -84,6 +85,8 @@ DENSE = 20
 #: a cell seldom lie so far apart; at the curves' 20 degrees the strawberry's places grow from 1,064 to 2,803 and
 #: a search of three of its contacts takes eight times as long
 FOLD = 60.0
+#: the places each point's nearest alike place is sought among (its own cell's place bounds it otherwise)
+NEAR = 8
 #: poses per model that take steps on the distance field (the best by the field's screen)
 FIELD_KEEP = 1000
 #: their steps
@@ -137,7 +140,9 @@ def triangles(points: np.ndarray, count: int) -> list[tuple[int, int, int]]:
 def _places(model):
     """The mesh ``model``'s places for contacts, built once (module text, step 1): positions ``(p, 3)``,
     their faces' normals ``(p, 3)`` and ``reach``, the farthest any of the dense points lies from its
-    own place (:func:`_own_places`), model units."""
+    nearest place of a normal alike (or its own place, :func:`_own_places`), model units."""
+    from scipy.spatial import cKDTree
+
     from ..registration.mesh_fast import first_per_direction
     from ..surfaces.mesh_table import area_samples
 
@@ -149,9 +154,14 @@ def _places(model):
         span = cell.max(axis=0) + 1
         key = (cell[:, 0] * span[1] + cell[:, 1]) * span[2] + cell[:, 2]
         chosen = first_per_direction(key, normals, FOLD)
-        own = _own_places(key, normals, chosen)
-        reach = float(np.linalg.norm(dense - dense[own], axis=1).max())
-        memo["contact_places"] = (dense[chosen], normals[chosen], reach)
+        P, N = dense[chosen], normals[chosen]
+        # each point's nearest place of a normal within FOLD of its own, else its own place (its cell's)
+        own = np.linalg.norm(dense - dense[_own_places(key, normals, chosen)], axis=1)
+        d, j = cKDTree(P).query(dense, k=min(NEAR, len(P)))
+        d, j = d.reshape(len(dense), -1), j.reshape(len(dense), -1)
+        alike = np.sum(normals[:, None, :] * N[j], axis=2) >= np.cos(np.radians(FOLD))
+        reach = float(np.minimum(np.where(alike, d, np.inf).min(axis=1), own).max())
+        memo["contact_places"] = (P, N, reach)
     return memo["contact_places"]
 
 
