@@ -131,7 +131,6 @@ def test_contacts_added_one_at_a_time_are_no_surer_than_given_at_once(meshes):
     answer as one touch of all six, and the session is no surer against ``unknown`` than that touch
     (within a factor of ten): the contacts are one search, and counting each as a touch of its own
     would leave ``unknown`` about ninety times less likely with every contact."""
-    from tactrec.io.contacts import Contacts
     from tactrec.io.touch import TactileData
 
     meshes = meshes[1:]
@@ -141,7 +140,7 @@ def test_contacts_added_one_at_a_time_are_no_surer_than_given_at_once(meshes):
             once = recognizer.recognize(data)
             session, c = recognizer.session(), data.contacts
             for i in range(len(c)):
-                one = Contacts(c.points[i:i + 1], c.normals[i:i + 1], c.normal_sd[i:i + 1], c.point_sd[i:i + 1])
+                one = c.rows(slice(i, i + 1))
                 result = session.add(TactileData.from_contacts(one, units=data.units, source=f"contact {i + 1}"))
             assert result.best == once.best == entry.name
             assert result.unknown >= 0.1 * once.unknown, (entry.name, result.unknown, once.unknown)
@@ -178,7 +177,6 @@ def test_next_sends_a_session_of_contacts_a_contact(meshes):
     follows two such lines on the true object, recording a contact where one meets it or a line that met
     nothing; most meet it, and each session ends on the right model."""
     from tactrec.bench.contacts import followed
-    from tactrec.io.contacts import Contacts
     from tactrec.io.session import MissedLine
     from tactrec.io.touch import TactileData
     from tactrec.session.result import Hypothesis
@@ -191,7 +189,7 @@ def test_next_sends_a_session_of_contacts_a_contact(meshes):
             truth = Hypothesis("truth", *truth_pose(data), 1.0, 0.0, np.zeros(0), ())
             session, c = recognizer.session(), data.contacts
             for i in range(6):                          # at random until some model is posed
-                one = Contacts(c.points[i:i + 1], c.normals[i:i + 1], c.normal_sd[i:i + 1], c.point_sd[i:i + 1])
+                one = c.rows(slice(i, i + 1))
                 if session.add(TactileData.from_contacts(one, units="mm", source=f"contact {i + 1}")).ranking:
                     break
             for i in range(2):

@@ -26,7 +26,6 @@ COUNTS = (3, 4, 5)
 
 def _searches(task) -> list[dict]:
     """The searches of one touch, ``task = (scan index, instance, seed, set)``, among its scan alone."""
-    from ..io.contacts import Contacts
     from ..io.touch import TactileData
     from ..simulation import simulate_contacts
 
@@ -37,9 +36,8 @@ def _searches(task) -> list[dict]:
     alone = recognizer([entry])
     out = []
     for n in COUNTS:
-        part = Contacts(c.points[:n], c.normals[:n], c.normal_sd[:n], c.point_sd[:n])
         start = time.perf_counter()
-        found = alone.recognize(TactileData.from_contacts(part, units=units, source=f"{n} contacts"))
+        found = alone.recognize(TactileData.from_contacts(c.rows(slice(n)), units=units, source=f"{n} contacts"))
         out.append({"model": entry.name, "instance": i, "contacts": n, "rejected": not found.ranking[0].ok,
                     "seconds": time.perf_counter() - start})
     return out
@@ -62,7 +60,7 @@ def run(*, out, instances: int = 10, seed: int = 0, jobs: int | None = None, qui
         seconds = _quantiles([r["seconds"] for r in found])
         per_set[scans] = {"searches": len(found), "rejected": len(missed), "by_count": by_count,
                           "seconds": seconds, "records": found}
-        q = "/".join(f"{x:.2f}" for x in seconds)
+        q = "-" if seconds is None else "/".join(f"{x:.2f}" for x in seconds)
         rows.append(f"| {scans} | {len(found)} | {len(missed)} ({100.0 * len(missed) / max(len(found), 1):.1f}%) | "
                     + " / ".join(str(by_count[n]) for n in COUNTS) + f" | {q} |")
         rows += [f"|   | {r['model']} {r['instance']}, {r['contacts']} contacts | | | |" for r in missed]

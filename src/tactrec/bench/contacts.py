@@ -110,7 +110,6 @@ def followed(proposal, model, truth, noise: float, normal_sd: float, rng):
 
 def _session(task) -> dict:
     """One session of ``task = (scan index, instance, seed, noise, normal_sd, set, strategy)``."""
-    from ..io.contacts import Contacts
     from ..io.session import MissedLine
     from ..io.touch import TactileData
     from ..session.result import Hypothesis
@@ -131,8 +130,7 @@ def _session(task) -> dict:
         found = _proposed(session, entry.model, truth, noise, normal_sd, pick) if strategy == "next" else None
         proposed = found is not None
         if found is None:
-            found = Contacts(c.points[drawn:drawn + 1], c.normals[drawn:drawn + 1], c.normal_sd[drawn:drawn + 1],
-                             c.point_sd[drawn:drawn + 1])
+            found = c.rows(slice(drawn, drawn + 1))
             drawn += 1
         if isinstance(found, MissedLine):
             result = session.add_miss(found)

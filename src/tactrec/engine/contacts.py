@@ -144,15 +144,14 @@ def _places(model):
     from scipy.spatial import cKDTree
 
     from ..registration.mesh_fast import first_per_direction
+    from ..surfaces.mesh_grid import grid_keys
     from ..surfaces.mesh_table import area_samples
 
     memo = model.search_memo
     if "contact_places" not in memo:
         dense, normals = area_samples(model, DENSE * PLACES, np.random.default_rng(0))
         size = float(np.sqrt(model.area / PLACES))
-        cell = np.floor((dense - dense.min(axis=0)) / size).astype(np.int64)
-        span = cell.max(axis=0) + 1
-        key = (cell[:, 0] * span[1] + cell[:, 1]) * span[2] + cell[:, 2]
+        key = grid_keys(dense, dense.min(axis=0), dense.max(axis=0), size)
         chosen = first_per_direction(key, normals, FOLD)
         P, N = dense[chosen], normals[chosen]
         # each point's nearest place of a normal within FOLD of its own, else its own place (its cell's)

@@ -68,6 +68,10 @@ class Contacts:
         given = self.point_sd[np.isfinite(self.point_sd)]
         return float(np.median(given)) if len(given) else 0.0
 
+    def rows(self, index) -> "Contacts":
+        """The contacts ``index`` selects (a slice, or indices), in that order."""
+        return Contacts(self.points[index], self.normals[index], self.normal_sd[index], self.point_sd[index])
+
     def joined(self, other: "Contacts") -> "Contacts":
         """These contacts and then ``other``'s (same frame)."""
         return Contacts(*(np.concatenate([a, b]) for a, b in zip(dataclasses.astuple(self), dataclasses.astuple(other))))

@@ -122,7 +122,6 @@ def first_per_direction(cells: np.ndarray, normal: np.ndarray, angle: float, *, 
     of the cell's points whose normal lies more than ``angle`` from its first's.  With ``folded``, only
     the places of cells with more than one direction."""
     _, first, inverse = np.unique(cells, return_index=True, return_inverse=True)
-    inverse = inverse.reshape(-1)
     head = normal[first][inverse]                                   # each point's cell's first
     off = np.nonzero(np.sum(normal * head, axis=1) < np.cos(np.deg2rad(angle)))[0]   # element-wise
     if len(off) == 0:
