@@ -90,7 +90,8 @@ def test_open_mesh_file_loads_and_sections(tmp_path):
     path = tmp_path / "tube.off"
     grid_cylinder().export(path)
     m = load_model(path)
-    assert m.kind == "mesh" and m.name == "tube" and not m._trimesh.is_watertight
+    assert m.kind == "mesh" and m.name == "tube"
+    assert not trimesh.Trimesh(m.vertices, m.faces, process=False).is_watertight
     site = np.array([float(np.argmin(np.abs(m.vertices[:, 2])))])
     frame = m.site_frame(site)
     curve = m.plane_section(site, frame.d1, spacing=0.5, count=21)
@@ -352,14 +353,15 @@ def test_plane_sections_are_trimeshs_own_cut_without_the_blas(scans):
     from tactrec.surfaces.mesh_sections import plane_section
 
     model = scans.get("mug").model
+    mesh = trimesh.Trimesh(model.vertices, model.faces, process=False)
     rng = np.random.default_rng(8)
     for k in range(12):
         v = int(rng.integers(len(model.vertices)))
         origin = model.vertices[v] if k % 2 == 0 else model.vertices[v] + rng.normal(size=3)   # through a vertex
         normal = np.array([0.0, 0.0, 1.0]) if k % 4 == 0 else rng.normal(size=3)
         normal = normal / np.linalg.norm(normal)
-        ours, theirs = plane_section(model.vertices, model.faces, origin, normal), \
-            model._trimesh.section(plane_origin=origin, plane_normal=normal)
+        ours = plane_section(model.vertices, model.faces, origin, normal)
+        theirs = mesh.section(plane_origin=origin, plane_normal=normal)
         assert len(ours.entities) == len(theirs.entities)
         for a, b in zip(ours.entities, theirs.entities):
             assert np.allclose(a.discrete(ours.vertices), b.discrete(theirs.vertices), rtol=0, atol=1e-9)

@@ -335,9 +335,7 @@ def simulate_contacts(model: SurfaceModel, count: int, *, noise: float = 0.0, no
     if model.kind == "mesh":
         points, normals = area_samples(model, count, rng)
     else:
-        frames = [model.site_frame(s) for s in model.random_sites(count, rng=rng)]
-        points = np.array([f.point for f in frames])
-        normals = np.array([f.normal for f in frames])
+        points, normals = model.site_points(model.random_sites(count, rng=rng))
     seen, tilt = perturbed(points, normals, noise=noise, normal_sd=normal_sd, rng=rng)
     R, t = (random_rigid_motion(rng, extent=model.size) if sensor_frame else (np.eye(3), np.zeros(3)))
     items = []

@@ -330,11 +330,12 @@ def _best_line(session, leading: list, weights: np.ndarray, *, radius: float, an
         for place in ranked[:TRIED * candidates]:      # the most disagreeing, until ``candidates`` lines qualify
             if taken >= candidates:
                 break
-            frame, c, normal = place.frame, place.point, place.normal
+            c, normal = place.point, place.normal
             line = MissedLine(c + standoff * normal, -normal, 2.0 * standoff)
             if any(models[g.model].planes(to_model(g, line.start)[None])[0][0] <= 0.0 for g in poses):
                 continue                                                  # starts inside some pose's surface
             start = rng.uniform(0.0, 2 * np.pi)
+            frame = model.site_frame(place.site)
             t1 = times(frame.d1, h.rotation)
             t2 = times(frame.d2, h.rotation)
             directions = None if single else fan(t1, t2, angle, start)

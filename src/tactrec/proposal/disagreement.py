@@ -42,10 +42,10 @@ TILT = 1e-3
 
 @dataclasses.dataclass(frozen=True)
 class Place:
-    """A candidate place: its surface frame on the hypothesis' model, world point ``(3,)`` and outward
-    unit normal ``(3,)``, and the disagreement there (standard errors; ``inf`` without rivals)."""
+    """A candidate place: its site on the hypothesis' model, world point ``(3,)`` and outward unit
+    normal ``(3,)``, and the disagreement there (standard errors; ``inf`` without rivals)."""
 
-    frame: object
+    site: np.ndarray
     point: np.ndarray
     normal: np.ndarray
     disagreement: float
@@ -73,11 +73,11 @@ def places(models: dict, h, pose, H0, rivals: list, contacts: np.ndarray, side: 
     the other models' poses; ``contacts (N, 3)`` the earlier contacts and ``side (3,)`` the mean of
     their outward unit normals, world frame; ``radius`` the reach (None: the whole object)."""
     model = models[h.model]
-    frames = [model.site_frame(s) for s in model.random_sites(SITES, rng=rng)]
-    if not frames:
+    sites = model.random_sites(SITES, rng=rng)
+    x_model, normals = model.site_points(sites)
+    if not len(x_model):
         return []
-    x_model = np.array([f.point for f in frames])
-    normals = times(np.array([f.normal for f in frames]), pose[:, :3])                # model -> world directions
+    normals = times(normals, pose[:, :3])                                                # model -> world directions
     normals = normals / np.linalg.norm(normals, axis=1, keepdims=True)
     x = to_world(h, x_model)
     # the half-space the touches came from, wider as they come from more sides (the mean of their
@@ -101,7 +101,7 @@ def places(models: dict, h, pose, H0, rivals: list, contacts: np.ndarray, side: 
         order = np.lexsort((own, -z))                      # most disagreeing; then the surest place
     else:                                                 # a model against unknown: the places as drawn
         z, order = np.full(len(index), np.inf), np.arange(len(index))
-    return [Place(frames[index[i]], x[i], normals[index[i]], float(z[i])) for i in order]
+    return [Place(sites[index[i]], x[i], normals[index[i]], float(z[i])) for i in order]
 
 
 def touched_side(model, h, contacts: np.ndarray) -> np.ndarray:

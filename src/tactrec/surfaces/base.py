@@ -102,6 +102,11 @@ class SurfaceModel(abc.ABC):
     def site_frame(self, site: np.ndarray) -> SiteFrame:
         """Point, outward normal and tangent frame at a site."""
 
+    def site_points(self, sites) -> tuple[np.ndarray, np.ndarray]:
+        """Points and outward unit normals ``(n, 3)`` of ``sites`` (rows as :meth:`random_sites` gives)."""
+        frames = [self.site_frame(s) for s in sites]
+        return (np.array([f.point for f in frames]).reshape(-1, 3), np.array([f.normal for f in frames]).reshape(-1, 3))
+
     @abc.abstractmethod
     def locate(self, point: np.ndarray) -> np.ndarray:
         """The site of the surface point nearest to ``point`` ``(3,)``."""

@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 from scipy import sparse
 
-from ..linalg import dot3, norm3, times
+from ..linalg import dot3, norm3
 from .base import SiteFrame, SurfaceModel, TableSamples
 from .mesh_field import DistanceField, build_field
 from .mesh_curvature import CurvatureField, curvature_field, paraboloid_curvatures, tangents, unit_rows
@@ -329,29 +329,28 @@ class MeshModel(SurfaceModel):
         n = np.where((d > tiny)[:, None], diff * (side / np.maximum(d, tiny))[:, None], fn)
         return (side * d).reshape(points.shape[:-1]), n.reshape(points.shape)
 
-    @cached_property
-    def _trimesh(self):
-        import trimesh
-
-        return trimesh.Trimesh(self.vertices, self.faces, process=False)
+    def site_points(self, sites) -> tuple[np.ndarray, np.ndarray]:
+        """Points and outward unit normals ``(n, 3)`` of ``sites``: ``(n, 1)`` vertices or ``(n, 3)`` faces."""
+        sites = np.asarray(sites, dtype=np.float64)
+        if sites.ndim != 2 or sites.shape[1] not in (1, 3):
+            raise ValueError("a mesh site is [vertex] or [face, b1, b2]")
+        if sites.shape[1] == 3:
+            b = np.stack([1.0 - sites[:, 1] - sites[:, 2], sites[:, 1], sites[:, 2]], axis=1)
+            c = self.faces[sites[:, 0].astype(np.int64)]
+            point = sum(b[:, k, None] * self.vertices[c[:, k]] for k in range(3))
+            normal = sum(b[:, k, None] * self.vertex_normals[c[:, k]] for k in range(3))
+            return point, unit_rows(normal)
+        v = sites[:, 0].astype(np.int64)
+        wrong = v[(v < 0) | (v >= len(self.vertices))]
+        if len(wrong):
+            raise ValueError(f"vertex {wrong[0]} is not in the mesh (0..{len(self.vertices) - 1})")
+        return self.vertices[v], self.vertex_normals[v]
 
     def site_frame(self, site) -> SiteFrame:
         site = np.atleast_1d(np.asarray(site, dtype=np.float64))
-        if len(site) == 1:
-            v = int(site[0])
-            if not 0 <= v < len(self.vertices):
-                raise ValueError(f"vertex {v} is not in the mesh (0..{len(self.vertices) - 1})")
-            point, normal = self.vertices[v], self.vertex_normals[v]
-        elif len(site) == 3:
-            f = int(site[0])
-            b = np.array([1.0 - site[1] - site[2], site[1], site[2]])
-            corners = self.faces[f]
-            point = times(b, self.vertices[corners])
-            normal = unit_rows(times(b, self.vertex_normals[corners]))
-        else:
-            raise ValueError("a mesh site is [vertex] or [face, b1, b2]")
-        d1, d2 = tangents(normal[None])
-        return SiteFrame(site, point, d1[0], d2[0], normal)
+        point, normal = self.site_points(site[None])
+        d1, d2 = tangents(normal)
+        return SiteFrame(site, point[0], d1[0], d2[0], normal[0])
 
     def vertex_frames(self, vertices) -> np.ndarray:
         """``(n, 3, 3)`` frames of ``vertices (n,)``, columns ``[d1 d2 n]`` as in :meth:`site_frame`."""
