@@ -105,9 +105,30 @@ def test_a_patch_file_round_trips_and_reads_as_points(tmp_path, sphere):
         assert h.oriented == (given is not None)
 
 
+def test_a_patch_that_states_its_noise_is_judged_by_it(tmp_path, sphere):
+    """A sensor that knows its depth noise states it (``point_sd``, data units): the touch's noise, which
+    the fit test and the probabilities read, is then the stated one, in either form of patch and kept
+    through a file; a patch that states none is judged by its own estimate."""
+    data = _patches(sphere, 1, 5, radius=5.0, noise=0.02)[0]
+    own = Touch.from_data(data).noise
+    assert own > 0.0
+    obj = json.loads(json.dumps(data.to_json()))
+    for form in ("height", "points"):
+        if form == "points":
+            obj["patch"] = {"points": data.patch.points.tolist()}
+        obj["patch"]["point_sd"] = 0.02
+        path = tmp_path / f"{form}.json"
+        path.write_text(json.dumps(obj))
+        stated = load_touch(path)
+        assert Touch.from_data(stated).noise == 0.02
+        save_touch(stated, tmp_path / "again.json")
+        assert Touch.from_data(load_touch(tmp_path / "again.json")).noise == 0.02
+
+
 def test_bad_patches_get_one_line(tmp_path, capsys):
     """A map mostly null, a patch of a few points, a hole around the middle, a patch beside curves, a patch
-    with a contact, and a sensor pose that is no rotation: each one line naming the file, exit status 2."""
+    with a contact, a sensor pose that is no rotation, and a stated noise that is negative or no number:
+    each one line naming the file, exit status 2."""
     big = [[0.0] * 9 for _ in range(9)]
     holed = [[None if (i + j) % 3 else 0.0 for j in range(9)] for i in range(9)]
     middle = [[None if abs(i - 4) <= 1 and abs(j - 4) <= 1 else 0.01 * (i * i + j * j) for j in range(9)]
@@ -118,7 +139,9 @@ def test_bad_patches_get_one_line(tmp_path, capsys):
              ({"patch": {"height": big, "pitch": 0.5}, "curves": [[[0, 0, 0]]]}, "one of"),
              ({"patch": {"height": big, "pitch": 0.5}, "contact": [0, 0, 0]}, "no 'contact'"),
              ({"patch": {"height": big, "pitch": 0.5, "sensor": {"rotation": [[2, 0, 0], [0, 1, 0], [0, 0, 1]],
-                                                                  "translation": [0, 0, 0]}}}, "rotation")]
+                                                                  "translation": [0, 0, 0]}}}, "rotation"),
+             ({"patch": {"height": big, "pitch": 0.5, "point_sd": -0.1}}, "point_sd"),
+             ({"patch": {"height": big, "pitch": 0.5, "point_sd": "0.1"}}, "point_sd")]
     for k, (obj, problem) in enumerate(cases):
         path = tmp_path / f"bad{k}.json"
         path.write_text(json.dumps(obj))
@@ -148,7 +171,8 @@ def test_a_simulated_ray_stops_at_the_surface_not_at_a_sign_far_from_it():
 def test_simulate_patch_writes_a_height_map(tmp_path, capsys):
     """``simulate --patch 3`` writes a height map of about 400 pixels that ``load_touch`` reads; ``--blur``
     smooths the surface the gel sees (the map moves, but by less than the sag it smooths: 0.05 mm on
-    this sphere), ``--depth`` leaves out the pixels below it."""
+    this sphere), ``--depth`` leaves out the pixels below it, ``--state-noise`` writes the depth noise
+    into the map."""
     maps = {}
     for name, extra in (("plain", []), ("blur", ["--blur", "0.5"]), ("depth", ["--depth", "0.1"])):
         out = tmp_path / f"{name}.json"
@@ -161,6 +185,9 @@ def test_simulate_patch_writes_a_height_map(tmp_path, capsys):
     moved = np.nanmax(np.abs(maps["blur"] - maps["plain"]))
     assert 1e-4 < moved < 0.05, moved
     assert np.nanmax(maps["depth"]) <= 0.1 and np.isfinite(maps["depth"]).sum() < np.isfinite(maps["plain"]).sum()
+    out = tmp_path / "stated.json"
+    assert main(["simulate", "sphere-33", "--patch", "3", "--noise", "0.02", "--state-noise", "--out", str(out)]) == 0
+    assert json.loads(out.read_text())["patch"]["point_sd"] == 0.02 and Touch.from_data(load_touch(out)).noise == 0.02
     capsys.readouterr()
 
 

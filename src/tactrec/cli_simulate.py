@@ -35,9 +35,10 @@ def cmd_simulate(args, *, floats) -> int:
                    noise_kind=args.noise_kind, outward=not args.no_outward, contact=args.contact,
                    sensor_frame=not args.model_frame, imperfections=imperfections)
     patch = dict(radius=args.patch, pitch=args.pitch, noise=args.noise, blur=args.blur, depth=args.depth,
-                 sensor_frame=not args.model_frame)
-    if args.patch is None and any(x is not None for x in (args.pitch, args.blur, args.depth)):
-        raise InputError("--pitch, --blur and --depth are for a patch: give --patch RADIUS", "tactrec simulate")
+                 sensor_frame=not args.model_frame, stated=args.state_noise)
+    if args.patch is None and (any(x is not None for x in (args.pitch, args.blur, args.depth)) or args.state_noise):
+        raise InputError("--pitch, --blur, --depth and --state-noise are for a patch: give --patch RADIUS",
+                         "tactrec simulate")
     if args.contacts is not None and (args.patch is not None or given):
         raise InputError("--contacts spreads its contacts over the object: give no --patch, --at, --uv or --vertex",
                          "tactrec simulate")
@@ -119,6 +120,8 @@ def add_simulate_parser(sub, *, count, positive, nonnegative, mesh_options):
     gel.add_argument("--pitch", type=positive, help="the pixels' spacing (default: about 400 pixels in the disc)")
     gel.add_argument("--blur", type=nonnegative, help="the gel's smoothing, a Gaussian of this sigma (default 0)")
     gel.add_argument("--depth", type=positive, help="the deepest the sensor sees below its plane (default RADIUS)")
+    gel.add_argument("--state-noise", action="store_true", help="the map states its depth noise (point_sd), as a "
+                     "calibrated sensor's would")
     single = p.add_argument_group("single contacts, as a probe or a force/torque sensor records them (--noise: "
                                   "each point's Gaussian sigma)")
     single.add_argument("--contacts", type=count(1), metavar="N", help="N contacts spread over the object (uniform "

@@ -128,8 +128,8 @@ class Touch:
         an :class:`InputError` where too few are left), then the estimate and the noise of those kept."""
         if data.contacts is not None:              # contacts: no curvature, their stated noise
             return cls(data, contact_geometry(data.contacts), 1.0, data.contacts.noise)
-        if data.patch is not None:                 # a patch: its own fit and noise (:mod:`.estimation_patch`)
-            noise = patch_noise(data.patch)
+        if data.patch is not None:                 # a patch: its own fit; its stated noise, or its own estimate
+            noise = patch_noise(data.patch) if data.patch.point_sd is None else float(data.patch.point_sd)
             geometry = estimate_patch(data, noise)
             return cls(data, geometry, 1.0, noise).with_estimate(geometry)
         data, count = kept(data)

@@ -249,15 +249,15 @@ def _first_hits(model, origins: np.ndarray, direction: np.ndarray, length: float
 
 def simulate_patch(model: SurfaceModel, site, *, radius: float, pitch: float | None = None, noise: float = 0.0,
                    blur: float = 0.0, depth: float | None = None, sensor_frame: bool = True,
-                   units: str | None = None, rng=None) -> TactileData:
+                   units: str | None = None, stated: bool = False, rng=None) -> TactileData:
     """A patch at ``site`` of ``model`` as a vision-based skin records it: a depth map over the
     tangent plane at the site (its x axis turned at random about the normal), ``pitch`` apart
     (default: about :data:`PATCH_POINTS` pixels in the disc), over a disc of ``radius``; each pixel
     the depth along the sensor's -z to the first surface it meets, null where none lies within
     ``depth`` below the plane (default ``radius``) or the pixel is beyond the disc; the gel's
     smoothing a Gaussian of sigma ``blur`` (model units, over the pixels seen), then Gaussian depth
-    noise of sigma ``noise``.  In a random sensor frame unless ``sensor_frame`` is false; the truth
-    as :func:`simulate_touch`'s."""
+    noise of sigma ``noise``, which the map states (``point_sd``) where ``stated``.  In a random sensor
+    frame unless ``sensor_frame`` is false; the truth as :func:`simulate_touch`'s."""
     from scipy.ndimage import gaussian_filter
 
     from .io.patch import MAX_HOLES, parse_patch
@@ -294,7 +294,7 @@ def simulate_patch(model: SurfaceModel, site, *, radius: float, pitch: float | N
     R, t_ = (random_rigid_motion(rng, extent=model.size) if sensor_frame else (np.eye(3), np.zeros(3)))
     sensor = {"rotation": compose(R, F).tolist(), "translation": (rotate(R, frame.point) + t_).tolist()}
     obj = {"height": [[None if not np.isfinite(d) else float(d) for d in row] for row in height], "pitch": pitch,
-           "sensor": sensor}
+           "sensor": sensor, **({"point_sd": float(noise)} if stated else {})}
     source = f"<simulated {model.name}>"
     truth = {"model": model.name, "site": np.asarray(frame.site, dtype=float).tolist(),
              "contact": frame.point.tolist(), "normal": n.tolist(),

@@ -57,6 +57,9 @@ class Patch:
         Whether ``n`` is known to point out of the object (a map's sensor; given normals).
     height, pitch : (rows, cols) float with NaN holes, and float; or None
         The map as read, where the patch came as one.
+    point_sd : float or None
+        The sensor's stated noise (a point's standard deviation, a map's along its depth; data units),
+        where given: the fit test reads it in place of the patch's own estimate.
     """
 
     points: np.ndarray
@@ -66,6 +69,7 @@ class Patch:
     oriented: bool
     height: np.ndarray | None = None
     pitch: float | None = None
+    point_sd: float | None = None
 
     @property
     def spacing(self) -> float:
@@ -87,16 +91,20 @@ class Patch:
             normals=None if self.normals is None else times(self.normals, R.T),
             frame=times(self.frame, R.T), origin=scale * (times(self.origin, R.T) + t),
             height=None if self.height is None else scale * self.height,
-            pitch=None if self.pitch is None else scale * self.pitch)
+            pitch=None if self.pitch is None else scale * self.pitch,
+            point_sd=None if self.point_sd is None else scale * self.point_sd)
 
     def to_json(self) -> dict:
         if self.height is not None:
             rows = [[None if not np.isfinite(d) else float(d) for d in row] for row in self.height]
-            return {"height": rows, "pitch": self.pitch,
-                    "sensor": {"rotation": self.frame.T.tolist(), "translation": self.origin.tolist()}}
-        out = {"points": self.points.tolist()}
-        if self.normals is not None:
-            out["normals"] = self.normals.tolist()
+            out = {"height": rows, "pitch": self.pitch,
+                   "sensor": {"rotation": self.frame.T.tolist(), "translation": self.origin.tolist()}}
+        else:
+            out = {"points": self.points.tolist()}
+            if self.normals is not None:
+                out["normals"] = self.normals.tolist()
+        if self.point_sd is not None:
+            out["point_sd"] = self.point_sd
         return out
 
 
@@ -125,10 +133,16 @@ def parse_patch(obj, source: str) -> Patch:
     for anything a patch cannot be."""
     if not isinstance(obj, dict) or ("points" in obj) == ("height" in obj):
         raise InputError("'patch' must be an object with either 'points' or 'height'", source)
+    point_sd = None
+    if obj.get("point_sd") is not None:
+        point_sd = number(obj["point_sd"], "patch point_sd", source)
+        if point_sd < 0:
+            raise InputError(f"'patch' point_sd must not be negative (got {point_sd:g})", source)
     if "points" in obj:
-        unknown = set(obj) - {"points", "normals"}
+        unknown = set(obj) - {"points", "normals", "point_sd"}
         if unknown:
-            raise InputError(f"'patch' with 'points' takes only 'normals' besides (got {sorted(unknown)[0]!r})", source)
+            raise InputError(f"'patch' with 'points' takes only 'normals' and 'point_sd' besides (got "
+                             f"{sorted(unknown)[0]!r})", source)
         points = _points(obj["points"], "patch point", source)
         normals = None
         if obj.get("normals") is not None:
@@ -141,12 +155,12 @@ def parse_patch(obj, source: str) -> Patch:
             normals = normals / length[:, None]
         _check_reach([points], source)
         frame, oriented = _plane(points, normals)
-        patch = Patch(points, normals, frame, points.mean(axis=0), oriented)
+        patch = Patch(points, normals, frame, points.mean(axis=0), oriented, point_sd=point_sd)
     else:
-        unknown = set(obj) - {"height", "pitch", "sensor"}
+        unknown = set(obj) - {"height", "pitch", "sensor", "point_sd"}
         if unknown:
-            raise InputError(f"'patch' with 'height' takes 'pitch' and 'sensor' besides (got {sorted(unknown)[0]!r})",
-                             source)
+            raise InputError(f"'patch' with 'height' takes 'pitch', 'sensor' and 'point_sd' besides (got "
+                             f"{sorted(unknown)[0]!r})", source)
         height = _height(obj["height"], source)
         pitch = number(obj.get("pitch"), "patch pitch", source)
         if pitch <= 0:
@@ -159,7 +173,7 @@ def parse_patch(obj, source: str) -> Patch:
                              source)
         points = times(_map_points(height, pitch)[valid], R.T) + t
         _check_reach([points], source)
-        patch = Patch(points, None, R.T.copy(), t, True, height, pitch)
+        patch = Patch(points, None, R.T.copy(), t, True, height, pitch, point_sd)
     if len(patch.points) < MIN_PATCH_POINTS:
         raise InputError(f"the patch has {len(patch.points)} points; at least {MIN_PATCH_POINTS} are needed to "
                          "estimate its curvature", source)
