@@ -350,14 +350,14 @@ def build_parser() -> argparse.ArgumentParser:
                    help="paper-fig11: the plane separations phi of the phi sweep (default 10,20,30,40,50,60)")
     p.add_argument("--paper-option", type=_number_option, action="append", metavar="NAME=VALUE",
                    help="paper-example, paper-table2/3/6, paper-fig11: an option of the paper method, one of its "
-                        "readings of the paper "
-                        "(e.g. parabola_points=3, phi_step=5); repeatable")
+                        "readings of the paper (e.g. parabola_points=3, phi_step=5); repeatable")
     p.add_argument("--sets", type=lambda text: text.split(","), metavar="SET,...",
                    help="calibration (hard, p3-78), multi-touch (hard-10, p3-78, similar, near-duplicates; "
                         "catalogue, 1,078 models, only when named), open-world, sensor and patch "
                         "(fig11, other; open-world also cad; patch also ycb, the 78, only when named): which sets to run")
     p.add_argument("--radii", type=_positives, metavar="MM,...", help="patch: the patches' radii (default 2,4,6,10)")
     p.add_argument("--blur", type=float, metavar="MM", help="patch: the gel's blur sigma (default 0)")
+    p.add_argument("--stated-noise", action="store_true", help="patch: each map states its depth noise")
     p.add_argument("--strategies", type=lambda text: text.split(","), metavar="NAME,...",
                    help="where each touch goes (random, next): multi-touch both by default, contacts random")
     p.add_argument("--settings", type=lambda text: text.split(","), metavar="NAME,...",

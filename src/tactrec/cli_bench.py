@@ -106,9 +106,12 @@ def cmd_bench(args) -> int:
             raise InputError("--settings applies to sensor only", args.name)
         extra["settings"] = ("clean",) + tuple(s for s in _known(args.settings, SETTINGS, "setting", "--settings",
                                                                  args.name) if s != "clean")
-    for option, value in (("--radii", args.radii), ("--blur", args.blur)):
+    for option, value in (("--radii", args.radii), ("--blur", args.blur),
+                          ("--stated-noise", args.stated_noise or None)):
         if value is not None and args.name != "patch":
             raise InputError(f"{option} applies to patch only", args.name)
+    if args.stated_noise:
+        extra["stated"] = True
     if args.radii is not None:
         extra["radii"] = tuple(args.radii)
     if args.blur is not None:

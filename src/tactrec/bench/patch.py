@@ -83,10 +83,12 @@ def _count(scans: str, instances: int) -> int:
     return max(1, -(-instances // 25)) if scans == "ycb" else instances
 
 
-def patch_touch(entry, m_index: int, instance: int, seed: int, radius: float, blur: float = 0.0):
+def patch_touch(entry, m_index: int, instance: int, seed: int, radius: float, blur: float = 0.0,
+                stated: bool = False):
     """The bench's patch on ``entry``: at the instance's spread vertex, or the next one whose disc
-    sees enough surface (on a mesh too coarse for that many spread vertices, at seeded random ones):
-    ``(vertex, data)``, ``(None, None)`` where none does (a model too small or thin for the patch)."""
+    sees enough surface (on a mesh too coarse for that many spread vertices, at seeded random ones), its
+    noise stated in the map where ``stated``: ``(vertex, data)``, ``(None, None)`` where none does (a
+    model too small or thin for the patch)."""
     from ..simulation import simulate_patch, spread_vertices
 
     vertices = spread_vertices(entry.model, instance + 8, rings=15, rng=instance_rng(seed, m_index))
@@ -96,7 +98,7 @@ def patch_touch(entry, m_index: int, instance: int, seed: int, radius: float, bl
     for k in range(instance, len(vertices)):
         try:
             return int(vertices[k]), simulate_patch(entry.model, [int(vertices[k])], radius=radius, noise=NOISE,
-                                                    blur=blur, rng=rng)
+                                                    blur=blur, stated=stated, rng=rng)
         except ValueError:
             continue
     return None, None                          # no place of this model takes a patch so large
@@ -105,10 +107,10 @@ def patch_touch(entry, m_index: int, instance: int, seed: int, radius: float, bl
 def _touch(task) -> dict:
     from .fit_limit import paired_gap
 
-    scans, m_index, instance, seed, radius, blur = task
+    scans, m_index, instance, seed, radius, blur, stated = task
     db = _db(scans)
     entry = db.entries[m_index]
-    vertex, touch = patch_touch(entry, m_index, instance, seed, radius, blur)
+    vertex, touch = patch_touch(entry, m_index, instance, seed, radius, blur, stated)
     if touch is None:                          # no sensor records such a patch of this model: counted apart
         return {"scans": scans, "model": entry.name, "instance": instance, "radius": radius, "blur": blur,
                 "no_place": True}
@@ -188,7 +190,7 @@ def _summary(rows: list[dict], chance, open_world: bool = True) -> dict:
 
 
 def run(*, out, instances: int = 3, seed: int = 0, jobs: int | None = None, quiet: bool = False,
-        sets=DEFAULT_SETS, radii=RADII, blur: float = 0.0, **_ignored) -> dict:
+        sets=DEFAULT_SETS, radii=RADII, blur: float = 0.0, stated: bool = False, **_ignored) -> dict:
     """Recognise the patches of ``sets`` at ``radii``; write ``patch.json`` and ``patch.md``."""
     out = Path(out)
     folder = out / "patch.parts" / _code_hash()
@@ -197,7 +199,8 @@ def run(*, out, instances: int = 3, seed: int = 0, jobs: int | None = None, quie
     for scans in sets:
         n = len(_db(scans).entries) if scans == "ycb" else len(_models(scans))
         count = _count(scans, instances)
-        tasks += [(scans, m, i, seed, float(r), float(blur)) for r in radii for m in range(n) for i in range(count)]
+        tasks += [(scans, m, i, seed, float(r), float(blur), bool(stated)) for r in radii for m in range(n)
+                  for i in range(count)]
     records = run_parallel(_saved, [(t, folder) for t in tasks], jobs=jobs or 1, quiet=quiet, desc="patch")
     summary = {}
     for scans in sets:
@@ -208,7 +211,7 @@ def run(*, out, instances: int = 3, seed: int = 0, jobs: int | None = None, quie
                                                       open_world=scans in OPEN_WORLD),
                                              no_place=sum(bool(x.get("no_place")) for x in rows))
     table = {"benchmark": "patch", "method": "fast", "instances": instances, "seed": seed, "noise": NOISE,
-             "blur": blur, "targets": TARGETS, "summary": summary, "records": records}
+             "blur": blur, "stated": bool(stated), "targets": TARGETS, "summary": summary, "records": records}
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / "patch.json", table)
     table["text"] = _text(table, sets, radii)
@@ -220,7 +223,8 @@ def _text(table: dict, sets, radii) -> str:
     s = table["summary"]
     ycb = f" ({_count('ycb', table['instances'])} on the 78)" if "ycb" in sets else ""
     lines = [f"fast, seed {table['seed']}, {table['instances']} patches per scan and radius{ycb}, depth noise "
-             f"{table['noise']} mm, blur {table['blur']} mm.", "",
+             f"{table['noise']} mm{' (stated in each map)' if table.get('stated') else ''}, blur {table['blur']} mm.",
+             "",
              "| set | radius mm | touches (no place) | right | clear ceiling | ceiling | clear search misses | "
              "located (<= 1 mm) | "
              "far: within the noise / clear | contact mm (median/p95/max) | s (median/p95/max) |",
