@@ -504,6 +504,10 @@ def test_bench_sweep_options_belong_to_their_benchmarks(tmp_path, capsys):
         "--strategies applies to multi-touch and contacts only")
     bad(capsys, ["bench", "multi-touch", "--strategies", "next,greedy", "--out", tmp_path / "bench"],
         "--strategies", "unknown strategy 'greedy'")
+    bad(capsys, ["bench", "patch", "--first-instance", "1", "--out", tmp_path / "bench"], "patch",
+        "--first-instance applies to contacts only")
+    bad(capsys, ["bench", "contacts", "--instances", "3", "--first-instance", "3", "--out", tmp_path / "bench"],
+        "contacts", "leaves no instance below --instances 3")
     assert files_in(tmp_path) == []
 
 

@@ -208,3 +208,23 @@ def test_next_sends_a_session_of_contacts_a_contact(meshes):
                     session.add(TactileData.from_contacts(found, units="mm", source=f"next {i + 1}"))
             right += session.result.best == entry.name
     assert right == 3 and met >= 4, (right, met)
+
+
+def test_bench_contacts_split_over_runs_gives_the_sessions_of_one_run(tmp_path, monkeypatch):
+    """``--first-instance`` runs the later instances alone, so two runs on two machines give, between
+    them, each session of one run (each session is seeded by its scan and instance alone)."""
+    from tactrec.bench import contacts
+
+    def session(task):                                   # the seeded draws a session starts from
+        m, i, seed = task[:3]
+        draw = contacts.instance_rng(seed, m, i).random()
+        return {"model": contacts._names()[m], "instance": i, "strategy": task[6],
+                "steps": [{"best": None, "confidence": draw, "unknown": 0.0, "seconds": 0.0}]}
+
+    monkeypatch.setattr(contacts, "_session", session)
+    whole = contacts.run(out=tmp_path / "whole", instances=3, jobs=1, quiet=True)
+    late = contacts.run(out=tmp_path / "late", instances=3, first=2, jobs=1, quiet=True)
+    early = contacts.run(out=tmp_path / "early", instances=2, jobs=1, quiet=True)
+    records = lambda table: table["sets"]["fig11 random"]["records"]            # noqa: E731
+    assert records(early) + records(late) == records(whole)
+    assert {r["instance"] for r in records(late)} == {2} and "instances 2 to 2" in late["text"]

@@ -322,52 +322,10 @@ def build_parser() -> argparse.ArgumentParser:
     add_show_parser(sub, count=_count, mesh_options=_mesh_options, methods=METHODS,
                     default_method=DEFAULT_METHOD).set_defaults(func=cmd_show)
 
-    from .bench import BENCHMARKS
+    from .cli_bench import add_bench_parser
 
-    width = max(map(len, BENCHMARKS))
-    p = sub.add_parser("bench", help="run a reproduction or benchmark (paper-table2, paper-table3, ...)",
-                       formatter_class=argparse.RawDescriptionHelpFormatter,
-                       epilog="benchmarks:\n" + "\n".join(f"  {name:<{width}}  {b.summary}"
-                                                            for name, b in BENCHMARKS.items())
-                       + f"\n\n  {'report':<{width}}  one offline HTML page of every benchmark's latest table and "
-                         "plots in --out")
-    p.add_argument("name", metavar="NAME", help="benchmark name (listed below)")
-    p.add_argument("--instances", type=_count(1), default=10, help="instances per model (default 10)")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    p.add_argument("--jobs", type=_count(1), default=None, help="worker processes (default: up to 2)")
-    p.add_argument("--method", choices=sorted(METHODS), default="paper",
-                   help="method of the paper-* reproductions (default paper)")
-    p.add_argument("--scans", choices=("shipped", "paper-like", "other", "cad"), default=None,
-                   help="paper-fig11, paper-table6, paper-steps: the YCB scans as shipped (paper-steps: paper-like), "
-                        "or scaled to 60-95 mm and Loop-subdivided to the paper's resolution; fast-vs-paper, "
-                        "fit-limit, field: 'other' for 14 free-form meshes from other sources (fetched once), 'cad' "
-                        "for 10 machined parts with sharp edges and flat faces (made by code)")
-    p.add_argument("--delta-only", action="store_true",
-                   help="paper-fig11: only the delta sweep (one recognition per touch), l and phi at the defaults")
-    p.add_argument("--lengths", type=_positives, default=None, metavar="MM,...",
-                   help="paper-fig11: the curve lengths l of the l sweep (default 9,12,15,18,21,24)")
-    p.add_argument("--angles", type=_positives, default=None, metavar="DEG,...",
-                   help="paper-fig11: the plane separations phi of the phi sweep (default 10,20,30,40,50,60)")
-    p.add_argument("--paper-option", type=_number_option, action="append", metavar="NAME=VALUE",
-                   help="paper-example, paper-table2/3/6, paper-fig11: an option of the paper method, one of its "
-                        "readings of the paper (e.g. parabola_points=3, phi_step=5); repeatable")
-    p.add_argument("--sets", type=lambda text: text.split(","), metavar="SET,...",
-                   help="calibration (hard, p3-78), multi-touch (hard-10, p3-78, similar, near-duplicates; "
-                        "catalogue, 1,078 models, only when named), open-world, sensor and patch "
-                        "(fig11, other; open-world also cad; patch also ycb, the 78, only when named): which sets to run")
-    p.add_argument("--radii", type=_positives, metavar="MM,...", help="patch: the patches' radii (default 2,4,6,10)")
-    p.add_argument("--blur", type=float, metavar="MM", help="patch: the gel's blur sigma (default 0)")
-    p.add_argument("--stated-noise", action="store_true", help="patch: each map states its depth noise")
-    p.add_argument("--strategies", type=lambda text: text.split(","), metavar="NAME,...",
-                   help="where each touch goes (random, next): multi-touch both by default, contacts random")
-    p.add_argument("--settings", type=lambda text: text.split(","), metavar="NAME,...",
-                   help="sensor: which settings to run besides clean ('tip 1 mm', 'outliers 3%%', ...; default all)")
-    p.add_argument("--against", metavar="FILE", default=None,
-                   help="answers: another run's answers.json, to list the entries whose JSON differs")
-    p.add_argument("--out", metavar="DIR", help="output folder (default bench-out)")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
-    add_cluster_option(p, several=True)
-    p.set_defaults(func=cmd_bench)
+    add_bench_parser(sub, count=_count, positives=_positives, number_option=_number_option,
+                     methods=METHODS).set_defaults(func=cmd_bench)
     return parser
 
 

@@ -6,7 +6,7 @@ from pathlib import Path
 
 from .errors import InputError
 
-__all__ = ["cmd_bench", "PAPER_OPTION_BENCHMARKS", "SCAN_KINDS", "CLUSTER_BENCHMARKS"]
+__all__ = ["add_bench_parser", "cmd_bench", "PAPER_OPTION_BENCHMARKS", "SCAN_KINDS", "CLUSTER_BENCHMARKS"]
 
 
 #: benchmarks that take the ``paper`` method's readings (``--paper-option``)
@@ -43,6 +43,62 @@ def _answers_file(path: str) -> dict:
     except (OSError, ValueError) as exc:
         raise InputError(f"not an answers.json of tactrec bench answers ({exc.__class__.__name__})", path) from None
     return table
+
+
+def add_bench_parser(sub, *, count, positives, number_option, methods):
+    """The ``bench`` subcommand's parser (its options' checks are :func:`cmd_bench`'s)."""
+    import argparse
+
+    from .bench import BENCHMARKS
+    from .cli_cluster import add_cluster_option
+
+    width = max(map(len, BENCHMARKS))
+    p = sub.add_parser("bench", help="run a reproduction or benchmark (paper-table2, paper-table3, ...)",
+                       formatter_class=argparse.RawDescriptionHelpFormatter,
+                       epilog="benchmarks:\n" + "\n".join(f"  {name:<{width}}  {b.summary}"
+                                                            for name, b in BENCHMARKS.items())
+                       + f"\n\n  {'report':<{width}}  one offline HTML page of every benchmark's latest table and "
+                         "plots in --out")
+    p.add_argument("name", metavar="NAME", help="benchmark name (listed below)")
+    p.add_argument("--instances", type=count(1), default=10, help="instances per model (default 10)")
+    p.add_argument("--first-instance", type=count(0), default=None, metavar="K",
+                   help="contacts: run instances K to --instances less one (a run split over machines; default 0)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--jobs", type=count(1), default=None, help="worker processes (default: up to 2)")
+    p.add_argument("--method", choices=sorted(methods), default="paper",
+                   help="method of the paper-* reproductions (default paper)")
+    p.add_argument("--scans", choices=("shipped", "paper-like", "other", "cad"), default=None,
+                   help="paper-fig11, paper-table6, paper-steps: the YCB scans as shipped (paper-steps: paper-like), "
+                        "or scaled to 60-95 mm and Loop-subdivided to the paper's resolution; fast-vs-paper, "
+                        "fit-limit, field: 'other' for 14 free-form meshes from other sources (fetched once), 'cad' "
+                        "for 10 machined parts with sharp edges and flat faces (made by code)")
+    p.add_argument("--delta-only", action="store_true",
+                   help="paper-fig11: only the delta sweep (one recognition per touch), l and phi at the defaults")
+    p.add_argument("--lengths", type=positives, default=None, metavar="MM,...",
+                   help="paper-fig11: the curve lengths l of the l sweep (default 9,12,15,18,21,24)")
+    p.add_argument("--angles", type=positives, default=None, metavar="DEG,...",
+                   help="paper-fig11: the plane separations phi of the phi sweep (default 10,20,30,40,50,60)")
+    p.add_argument("--paper-option", type=number_option, action="append", metavar="NAME=VALUE",
+                   help="paper-example, paper-table2/3/6, paper-fig11: an option of the paper method, one of its "
+                        "readings of the paper (e.g. parabola_points=3, phi_step=5); repeatable")
+    p.add_argument("--sets", type=lambda text: text.split(","), metavar="SET,...",
+                   help="calibration (hard, p3-78), multi-touch (hard-10, p3-78, similar, near-duplicates; "
+                        "catalogue, 1,078 models, only when named), open-world, sensor and patch "
+                        "(fig11, other; open-world also cad; patch also ycb, the 78, only when named): "
+                        "which sets to run")
+    p.add_argument("--radii", type=positives, metavar="MM,...", help="patch: the patches' radii (default 2,4,6,10)")
+    p.add_argument("--blur", type=float, metavar="MM", help="patch: the gel's blur sigma (default 0)")
+    p.add_argument("--stated-noise", action="store_true", help="patch: each map states its depth noise")
+    p.add_argument("--strategies", type=lambda text: text.split(","), metavar="NAME,...",
+                   help="where each touch goes (random, next): multi-touch both by default, contacts random")
+    p.add_argument("--settings", type=lambda text: text.split(","), metavar="NAME,...",
+                   help="sensor: which settings to run besides clean ('tip 1 mm', 'outliers 3%%', ...; default all)")
+    p.add_argument("--against", metavar="FILE", default=None,
+                   help="answers: another run's answers.json, to list the entries whose JSON differs")
+    p.add_argument("--out", metavar="DIR", help="output folder (default bench-out)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_cluster_option(p, several=True)
+    return p
 
 
 def cmd_bench(args) -> int:
@@ -112,6 +168,13 @@ def cmd_bench(args) -> int:
             raise InputError(f"{option} applies to patch only", args.name)
     if args.stated_noise:
         extra["stated"] = True
+    if args.first_instance is not None:
+        if args.name != "contacts":
+            raise InputError("--first-instance applies to contacts only", args.name)
+        if args.first_instance >= args.instances:
+            raise InputError(f"--first-instance {args.first_instance} leaves no instance below --instances "
+                             f"{args.instances}", args.name)
+        extra["first"] = args.first_instance
     if args.radii is not None:
         extra["radii"] = tuple(args.radii)
     if args.blur is not None:

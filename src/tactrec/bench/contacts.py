@@ -171,10 +171,12 @@ def _summary(records: list[dict]) -> dict:
 
 
 def run(*, out, instances: int = 10, seed: int = 0, jobs: int | None = None, quiet: bool = False,
-        sets=SETS[:1], strategies=STRATEGIES[:1], **_ignored) -> dict:
-    """Run ``instances`` sessions per scan of each of ``sets`` with each of ``strategies``; write
-    ``contacts.json`` and ``contacts.md``.  Each strategy's sessions are saved apart, under a hash of
-    the sources it runs (an interrupted or repeated run reuses them)."""
+        sets=SETS[:1], strategies=STRATEGIES[:1], first: int = 0, **_ignored) -> dict:
+    """Run ``instances`` sessions per scan of each of ``sets`` with each of ``strategies`` (those from
+    instance ``first`` on: each session depends on its scan, instance and seed alone, so a run split
+    over machines gives the sessions one run would); write ``contacts.json`` and ``contacts.md``.  Each
+    strategy's sessions are saved apart, under a hash of the sources it runs (an interrupted or repeated
+    run reuses them)."""
     out = Path(out)
     strategies = tuple(s for s in STRATEGIES if s in strategies)
     if not strategies:
@@ -184,13 +186,13 @@ def run(*, out, instances: int = 10, seed: int = 0, jobs: int | None = None, qui
         for strategy in strategies:
             folder = out / "contacts.parts" / scans / f"{strategy}-{_code_hash(strategy)}"
             folder.mkdir(parents=True, exist_ok=True)
-            tasks = [(m, i, seed, NOISE, NORMAL_SD, scans, strategy) for i in range(instances)
+            tasks = [(m, i, seed, NOISE, NORMAL_SD, scans, strategy) for i in range(first, instances)
                      for m in range(len(_names(scans)))]
             records = run_parallel(_saved, [(t, folder) for t in tasks], jobs=jobs or 1, quiet=quiet,
                                    desc=f"contacts {scans} {strategy}")
             per_set[f"{scans} {strategy}"] = {"summary": _summary(records), "records": records}
-    table = {"benchmark": "contacts", "method": "fast", "instances": instances, "seed": seed, "noise": NOISE,
-             "normal_sd": NORMAL_SD, "contacts": CONTACTS, "target": TARGET, "sets": per_set}
+    table = {"benchmark": "contacts", "method": "fast", "instances": instances, "first_instance": first, "seed": seed,
+             "noise": NOISE, "normal_sd": NORMAL_SD, "contacts": CONTACTS, "target": TARGET, "sets": per_set}
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / "contacts.json", table)
     rows = []
@@ -202,7 +204,8 @@ def run(*, out, instances: int = 10, seed: int = 0, jobs: int | None = None, qui
                     f"{TARGET:g}%) | {median} | {s['sure_wrong_answers']} | {s['missed']} | {q} |")
     table["text"] = "\n".join([
         f"Sessions of up to {CONTACTS} approaches, each scan recognised among its set; point noise {NOISE} mm, "
-        f"normals {NORMAL_SD} degrees, seed {seed}.", "",
+        f"normals {NORMAL_SD} degrees, seed {seed}" + (f"; instances {first} to {instances - 1}" if first else "")
+        + ".", "",
         "| set and strategy | sessions | right at >= 0.95 within 12 (and after) | median approaches to it | "
         "sure and wrong answers | approaches that met nothing | s an add (median/p95/max) |",
         "|---|---|---|---|---|---|---|", *rows])
