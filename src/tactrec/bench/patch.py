@@ -132,8 +132,15 @@ def _touch(task) -> dict:
                                                                  win.translation[None], x)[0]) / win.scale
         gap = paired_gap(on_winner, on_truth)          # right and far: whether the data tell the places apart
     if correct:
-        found = win.scale * (win.rotation @ touch.contact) + win.translation
-        contact = float(np.linalg.norm(found - np.asarray(touch.meta["truth"]["contact"])) / win.scale)
+        contact = _off(win, touch)
+    # where a user who knows the object asks where the patch lies on it: the scan alone searched
+    alone = r.recognize(touch, among=[entry.name])
+    mine = alone.registration
+    alone_mm = alone_gap = None
+    if mine is not None:
+        alone_mm = _off(mine, touch)
+        on_mine = entry.model.distance(apply_poses(mine.rotation[None] * mine.scale, mine.translation[None], x)[0])
+        alone_gap = paired_gap(on_mine / mine.scale, on_truth)
     return {"scans": scans, "model": entry.name, "instance": instance, "radius": radius, "blur": blur,
             "vertex": vertex, "points": len(touch.patch.points), "noise_estimate": float(known.touch.noise),
             "recognized": known.best, "correct": correct, "ambiguous": known.ambiguous,
@@ -141,8 +148,15 @@ def _touch(task) -> dict:
             "kind": "correct" if correct else ("outfitted" if others < own else "search miss"),
             "gap_se": gap, "within_noise": gap is not None and abs(gap) < 2.0,
             "located": None if contact is None else bool(contact <= TARGETS["contact_mm"]),
+            "alone_mm": alone_mm, "alone_gap_se": alone_gap, "alone_confidence": float(alone.confidence),
             "known": _evidence(known), "unknown": None if unknown is None else _evidence(unknown),
             "unknown_seconds": None if unknown is None else unknown.seconds}
+
+
+def _off(registration, touch) -> float:
+    """How far ``registration`` places the patch's contact from where it was taken (the data's units)."""
+    found = registration.scale * (registration.rotation @ touch.contact) + registration.translation
+    return float(np.linalg.norm(found - np.asarray(touch.meta["truth"]["contact"])) / registration.scale)
 
 
 def _evidence(rec) -> dict | None:
@@ -185,6 +199,12 @@ def _summary(rows: list[dict], chance, open_world: bool = True) -> dict:
             "far_within_noise": sum(r["correct"] and not r["located"] and r["within_noise"] for r in rows),
             "far_clear": sum(r["correct"] and not r["located"] and not r["within_noise"] for r in rows),
             "seconds": _quantiles([r["seconds"] for r in rows]),
+            "alone_located_percent": _percent([r["alone_mm"] is not None and r["alone_mm"] <= TARGETS["contact_mm"]
+                                               for r in rows]),
+            # sure of a place more than the target off that the truth clearly fits better
+            "alone_sure_far": sum(r["alone_confidence"] >= SURE and r["alone_mm"] is not None
+                                  and r["alone_mm"] > TARGETS["contact_mm"] and r["alone_gap_se"] >= 2.0
+                                  for r in rows),
             "calibration": _calibration(rows, chance) if open_world else None,
             "fit_test": _calibration(rows, None) if open_world else None}
 
@@ -227,8 +247,9 @@ def _text(table: dict, sets, radii) -> str:
              "",
              "| set | radius mm | touches (no place) | right | clear ceiling | ceiling | clear search misses | "
              "located (<= 1 mm) | "
-             "far: within the noise / clear | contact mm (median/p95/max) | s (median/p95/max) |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]
+             "far: within the noise / clear | contact mm (median/p95/max) | s (median/p95/max) | "
+             "its scan alone: located (<= 1 mm) / sure, farther and clearly worse |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     q = lambda v, f: "-" if v is None else "/".join(f"{x:{f}}" for x in v)   # noqa: E731
     p = lambda v: "-" if v is None else f"{v:.0f}%"                          # noqa: E731
     for scans in sets:
@@ -237,7 +258,8 @@ def _text(table: dict, sets, radii) -> str:
             lines.append(f"| {scans} | {r:g} | {x['touches']} ({x['no_place']}) | {x['accuracy_percent']:.1f}% | "
                          f"{x['clear_ceiling_percent']:.1f}% | {x['ceiling_percent']:.1f}% | "
                          f"{x['clear_search_misses']} | {p(x['located_percent'])} | {x['far_within_noise']} / "
-                         f"{x['far_clear']} | {q(x['contact_mm'], '.2f')} | {q(x['seconds'], '.2f')} |")
+                         f"{x['far_clear']} | {q(x['contact_mm'], '.2f')} | {q(x['seconds'], '.2f')} | "
+                         f"{p(x['alone_located_percent'])} / {x['alone_sure_far']} |")
     if not any(x in OPEN_WORLD for x in sets):
         return "\n".join(lines) + "\n"
     lines += ["", "Known and unknown (the scan left out) mixed one to one, with the set's null model of chance fits, "
