@@ -23,6 +23,10 @@ Reported per set and radius:
 * the contact's error (mm) when right: the patch's middle under the found
   pose against the true surface point there;
 * the recognition's seconds (median, p95, max);
+* on its scan alone (the patch searched with ``among`` the touched scan, as
+  a user who knows the object asks where it was touched): how many are
+  located within 1 mm, and how many are sure (>= 0.95) of a place farther
+  off that the true pose fits clearly better (paired, two standard errors);
 * how many wrong answers were sure (probability >= 0.95), and the expected
   calibration error over the known and unknown outcomes mixed one to one,
   with the set's null model of chance fits, calibrated on curves and patches
