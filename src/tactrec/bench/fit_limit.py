@@ -48,6 +48,12 @@ def _code_hash() -> str:
     return sources_hash(*CORE_SOURCES, "bench/fast_vs_paper.py", "bench/common.py", "bench/fit_limit.py")
 
 
+def registered_distances(model, registration, x: np.ndarray) -> np.ndarray:
+    """The distances of the data points ``x`` to ``model`` under ``registration`` (the data's units)."""
+    return model.distance(apply_poses(registration.rotation[None] * registration.scale,
+                                      registration.translation[None], x)[0]) / registration.scale
+
+
 def paired_gap(winner: np.ndarray, truth: np.ndarray) -> float:
     """How many standard errors the data points lie farther from the winner than from the truth.
 
@@ -79,8 +85,7 @@ def _touch(task) -> dict:
     if not correct and rec.registration is not None:
         win = rec.registration
         x = np.asarray(touch.points, dtype=np.float64)
-        on_winner = db.get(win.model).model.distance(apply_poses(win.rotation[None] * win.scale,
-                                                                 win.translation[None], x)[0]) / win.scale
+        on_winner = registered_distances(db.get(win.model).model, win, x)
         on_truth = entry.model.distance(apply_poses(R, t, x * scale)[0]) / scale
         gap = paired_gap(on_winner, on_truth)
     return {"model": entry.name, "protocol": protocol, "instance": instance, "site": site,

@@ -109,7 +109,7 @@ def patch_touch(entry, m_index: int, instance: int, seed: int, radius: float, bl
 
 
 def _touch(task) -> dict:
-    from .fit_limit import paired_gap
+    from .fit_limit import paired_gap, registered_distances
 
     scans, m_index, instance, seed, radius, blur, stated = task
     db = _db(scans)
@@ -132,8 +132,7 @@ def _touch(task) -> dict:
     on_truth = entry.model.distance(apply_poses(R, t, x * scale)[0]) / scale
     win = known.registration
     if win is not None:
-        on_winner = db.get(win.model).model.distance(apply_poses(win.rotation[None] * win.scale,
-                                                                 win.translation[None], x)[0]) / win.scale
+        on_winner = registered_distances(db.get(win.model).model, win, x)
         gap = paired_gap(on_winner, on_truth)          # right and far: whether the data tell the places apart
     if correct:
         contact = _off(win, touch)
@@ -143,8 +142,7 @@ def _touch(task) -> dict:
     alone_mm = alone_gap = None
     if mine is not None:
         alone_mm = _off(mine, touch)
-        on_mine = entry.model.distance(apply_poses(mine.rotation[None] * mine.scale, mine.translation[None], x)[0])
-        alone_gap = paired_gap(on_mine / mine.scale, on_truth)
+        alone_gap = paired_gap(registered_distances(entry.model, mine, x), on_truth)
     return {"scans": scans, "model": entry.name, "instance": instance, "radius": radius, "blur": blur,
             "vertex": vertex, "points": len(touch.patch.points), "noise_estimate": float(known.touch.noise),
             "recognized": known.best, "correct": correct, "ambiguous": known.ambiguous,
