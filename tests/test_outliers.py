@@ -124,7 +124,8 @@ def test_a_slipping_sensors_curve_ends_are_judged_by_the_fit(small):
     touch, with at most two good end points (where the judged points leave the pose free: the module
     text), and in 17 or more nothing else (outliers == 2); the right model wins with a fit's error
     (under 0.01 mm) in 19 or more.  Without the spike the sensor is not known to slip, and the end
-    point is kept (outliers == 0)."""
+    point is kept (outliers == 0): a rule, checked on the first touch of each mesh (such a touch fits
+    no model, and its search runs to its budget)."""
     exact = right = 0
     with Recognizer(small) as recognizer:
         for k in range(20):
@@ -146,8 +147,9 @@ def test_a_slipping_sensors_curve_ends_are_judged_by_the_fit(small):
             assert 2 <= result.outliers <= 4, (k, result.outliers)
             exact += result.outliers == 2
             right += result.best == entry.name and result.registration.error < 0.01
-            kept = recognizer.recognize(only_end)
-            assert kept.outliers == 0 and len(kept.touch.points) == len(data.points)
+            if k < len(small):
+                kept = recognizer.recognize(only_end)
+                assert kept.outliers == 0 and len(kept.touch.points) == len(data.points)
     assert exact >= 17 and right >= 19, (exact, right)
 
 
