@@ -36,6 +36,7 @@ from ..runner import Held, Pool, Serial, can_fork
 from ..tables import CurvatureTable
 from ..units import conversion
 from .again import best_error, judge_ends, missing, other_meetings
+from .places import other_places, place_share, place_stage
 from .result import Recognition
 
 __all__ = ["Recognizer", "recognize", "ModelEntry", "check_scale", "OFF_SCALE"]
@@ -277,6 +278,12 @@ class Recognizer:
         out = Recognition(ranking, touch.estimate, 0.0, self.method.name, found, outcome.settled, outcome.work,
                           outcome.depth, touch, outcome.allowed, self.unknown_prior, self.chance)
         out.best                                # the answer and its probabilities are part of its seconds
+        others = other_places(out.registration, touch)
+        if others:                              # whether the data tell its place from the others posed there
+            found = [out.registration, *others]
+            signed = self.runner.map(place_stage, [self._number[r.model] for r in found], touch, items=found)
+            share = place_share(signed, touch, self.floor)
+            object.__setattr__(out, "place", share)                               # set once, before anyone sees it
         object.__setattr__(out, "seconds", time.perf_counter() - start)          # set once, before anyone sees it
         return out
 

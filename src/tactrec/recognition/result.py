@@ -9,7 +9,7 @@ from ..estimation import LocalGeometry
 from ..features import Touch
 from ..io.meeting import meeting
 from ..answer import Answer
-from ..probability import UNKNOWN_PRIOR, Evidence
+from ..probability import AMBIGUOUS, UNKNOWN_PRIOR, Evidence
 from ..registration.result import Registration
 
 __all__ = ["Recognition", "LOCATED"]
@@ -54,6 +54,11 @@ class Recognition(Answer):
     chance : NullModel or None
         The database's null model of chance fits (:mod:`tactrec.chance`), None where it has none:
         then ``unknown`` comes from the fit test alone.
+    place : float
+        The answer's place's share of the replicates among it and the other places of its model
+        the search posed beyond the touch's reach (:mod:`.places`): below
+        :data:`~tactrec.probability.AMBIGUOUS`, the data fit another place of the object about as
+        well, and the contact is not located; 1 where no other place was posed.
     """
 
     ranking: list[Registration]
@@ -68,17 +73,19 @@ class Recognition(Answer):
     allowed: int | None = None
     unknown_prior: float = UNKNOWN_PRIOR
     chance: object = None
+    place: float = 1.0
 
     def _posed(self) -> list[str]:
         return [r.model for r in self.ranking if r.ok]
 
     @property
     def located(self) -> bool:
-        """False when the data leave the contact free on the best model (its ``spread`` exceeds
-        :data:`LOCATED` x its error: a direction the data do not constrain, along a cylinder or
-        over a flat patch)."""
+        """False when the data leave the contact free on the best model: its ``spread`` exceeds
+        :data:`LOCATED` x its error (a direction the data do not constrain, along a cylinder or
+        over a flat patch), or another place of it fits about as well (:attr:`place` below
+        :data:`~tactrec.probability.AMBIGUOUS`)."""
         r = self.registration
-        return r is None or not r.spread > LOCATED * r.error
+        return r is None or not (r.spread > LOCATED * r.error or self.place < AMBIGUOUS)
 
     @property
     def outliers(self) -> int:
@@ -113,6 +120,7 @@ class Recognition(Answer):
             "calibrated": self.chance is not None,
             "ambiguous": self.ambiguous,
             "located": self.located,
+            "place": self.place,
             "settled": self.settled,
             "outliers": self.outliers,
             "meeting": self.meeting,
