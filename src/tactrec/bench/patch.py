@@ -21,7 +21,9 @@ Reported per set and radius:
   distances differ by less than two standard errors (paired);
   ``clear ceiling`` = 100 - outfitted - search misses within the noise;
 * the contact's error (mm) when right: the patch's middle under the found
-  pose against the true surface point there;
+  pose against the true surface point there; and how many right answers say
+  they are located (:attr:`~tactrec.recognition.Recognition.located`), of
+  those how many lie farther off than the target;
 * the recognition's seconds (median, p95, max);
 * on its scan alone (the patch searched with ``among`` the touched scan, as
   a user who knows the object asks where it was touched): how many are
@@ -150,6 +152,7 @@ def _touch(task) -> dict:
             "kind": "correct" if correct else ("outfitted" if others < own else "search miss"),
             "gap_se": gap, "within_noise": gap is not None and abs(gap) < 2.0,
             "located": None if contact is None else bool(contact <= TARGETS["contact_mm"]),
+            "says_located": bool(known.located), "place": float(known.place),
             "alone_mm": alone_mm, "alone_gap_se": alone_gap, "alone_confidence": float(alone.confidence),
             "known": _evidence(known), "unknown": None if unknown is None else _evidence(unknown),
             "unknown_seconds": None if unknown is None else unknown.seconds}
@@ -200,6 +203,9 @@ def _summary(rows: list[dict], chance, open_world: bool = True) -> dict:
             "located_percent": _percent([r["located"] for r in rows if r["correct"]]),
             "far_within_noise": sum(r["correct"] and not r["located"] and r["within_noise"] for r in rows),
             "far_clear": sum(r["correct"] and not r["located"] and not r["within_noise"] for r in rows),
+            # what the answer says of its place: located, and of those, how many lie beyond the target
+            "says_located": sum(r["correct"] and bool(r.get("says_located")) for r in rows),
+            "says_located_far": sum(r["correct"] and bool(r.get("says_located")) and not r["located"] for r in rows),
             "seconds": _quantiles([r["seconds"] for r in rows]),
             "alone_located_percent": _percent([r["alone_mm"] is not None and r["alone_mm"] <= TARGETS["contact_mm"]
                                                for r in rows]),
@@ -249,9 +255,9 @@ def _text(table: dict, sets, radii) -> str:
              "",
              "| set | radius mm | touches (no place) | right | clear ceiling | ceiling | clear search misses | "
              "located (<= 1 mm) | "
-             "far: within the noise / clear | contact mm (median/p95/max) | s (median/p95/max) | "
-             "its scan alone: located (<= 1 mm) / sure, farther and clearly worse |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "far: within the noise / clear | says located: all / farther | contact mm (median/p95/max) | "
+             "s (median/p95/max) | its scan alone: located (<= 1 mm) / sure, farther and clearly worse |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     q = lambda v, f: "-" if v is None else "/".join(f"{x:{f}}" for x in v)   # noqa: E731
     p = lambda v: "-" if v is None else f"{v:.0f}%"                          # noqa: E731
     for scans in sets:
@@ -260,7 +266,8 @@ def _text(table: dict, sets, radii) -> str:
             lines.append(f"| {scans} | {r:g} | {x['touches']} ({x['no_place']}) | {x['accuracy_percent']:.1f}% | "
                          f"{x['clear_ceiling_percent']:.1f}% | {x['ceiling_percent']:.1f}% | "
                          f"{x['clear_search_misses']} | {p(x['located_percent'])} | {x['far_within_noise']} / "
-                         f"{x['far_clear']} | {q(x['contact_mm'], '.2f')} | {q(x['seconds'], '.2f')} | "
+                         f"{x['far_clear']} | {x['says_located']} / {x['says_located_far']} | "
+                         f"{q(x['contact_mm'], '.2f')} | {q(x['seconds'], '.2f')} | "
                          f"{p(x['alone_located_percent'])} / {x['alone_sure_far']} |")
     if not any(x in OPEN_WORLD for x in sets):
         return "\n".join(lines) + "\n"
