@@ -67,7 +67,7 @@ def place_stage(held, indices, touch, found: list[Registration]) -> list[np.ndar
     for i, r in zip(indices, found):
         t = touch.in_units(r.scale)
         exact = t.exact(held.entries[i].model)
-        R, tr, error, _ = solve(exact, r.rotation[None], r.translation[None], t.joint_points, steps)
+        R, tr, _, _ = solve(exact, r.rotation[None], r.translation[None], t.joint_points, steps)
         before = residuals(exact, r.rotation, r.translation, touch.joint_points, r.scale)
         after = residuals(exact, R[0], tr[0], touch.joint_points, r.scale)
         out.append(after if np.mean(np.abs(after)) < np.mean(np.abs(before)) else before)
