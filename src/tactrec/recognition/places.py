@@ -11,8 +11,10 @@ against the answer's pose as the models are weighed (:mod:`tactrec.probability`:
 distances to the touch's points, resampled): the answer's place's share of the replicates is
 :attr:`~tactrec.recognition.result.Recognition.place`, and below
 :data:`~tactrec.probability.AMBIGUOUS` the contact is not located.  An alternative was refined
-on a part of the points only; each pose first takes the exact steps of the search's final polish
-on all of them (:func:`place_stage`), so that two places alike read alike.
+on a part of the points only, so it bounds its place's fit from above: where the others as posed
+already fit about as well, the answer is not located; else each takes the exact steps of the
+search's final polish on all the points (:func:`place_stage`), which bring its fit closer, and is
+weighed again, so that two places alike read alike.
 """
 
 from __future__ import annotations

@@ -29,7 +29,7 @@ from ..errors import InputError
 from ..features import Context, Touch
 from ..io.touch import TactileData
 from ..methods import DEFAULT_METHOD, get_method
-from ..probability import FLOOR, UNKNOWN_PRIOR, evidence, fit_limit, plausible_fit, residuals, resolution
+from ..probability import AMBIGUOUS, FLOOR, UNKNOWN_PRIOR, evidence, fit_limit, plausible_fit, residuals, resolution
 from ..methods.base import NOT_SEARCHED, SearchOutcome
 from ..registration.result import Outcome, Registration
 from ..runner import Held, Pool, Serial, can_fork
@@ -280,9 +280,11 @@ class Recognizer:
         out.best                                # the answer and its probabilities are part of its seconds
         others = other_places(out.registration, touch)
         if others:                              # whether the data tell its place from the others posed there
-            found = [out.registration, *others]
-            signed = self.runner.map(place_stage, [self._number[r.model] for r in found], touch, items=found)
-            share = place_share(signed, touch, self.floor)
+            answer = self._residuals_of([out.registration], touch)
+            share = place_share(answer + self._residuals_of(others, touch), touch, self.floor)
+            if share >= AMBIGUOUS:              # the polish brings the others' fits closer: only then can it tell
+                polished = self.runner.map(place_stage, [self._number[r.model] for r in others], touch, items=others)
+                share = place_share(answer + polished, touch, self.floor)
             object.__setattr__(out, "place", share)                               # set once, before anyone sees it
         object.__setattr__(out, "seconds", time.perf_counter() - start)          # set once, before anyone sees it
         return out
